@@ -1,0 +1,5 @@
+import sys
+
+from isaac.cli import main
+
+sys.exit(main())

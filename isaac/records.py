@@ -1,0 +1,95 @@
+"""What leaves the step: plain, immutable records of arrays.
+
+Conventions used by every field below (and by the log format, docs/log-format.md):
+- SI units: m, kg, s, rad. World frame: x right, y up. Angles counter-clockwise.
+- Bodies are indexed 0..n-1 in scene order (generators already expanded).
+- A contact row is one contact *point* between bodies ``a < b``. ``normal`` is a unit vector that
+  points from body a towards body b. ``depth`` is the penetration (m, >= 0; negative only for a
+  speculative contact, where it is minus the gap). The impulse ``j`` (N·s, >= 0) was applied as
+  ``-j * normal`` to a and ``+j * normal`` to b at ``point``; ``tangent_impulse`` (N·s, signed, along
+  ``tangent = (-normal_y, normal_x)``) likewise ``-jt * tangent`` to a and ``+jt * tangent`` to b.
+- ``push_a`` / ``push_b`` are the displacements (m, world) the MTD push-out applied to a and b for
+  this row's pair; a pair's push is stored on its first point (``slot == 0``) only, so summing the
+  rows gives what was applied.
+- Every array is a private copy: a record never changes after it is made.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+CONTACT_FIELDS = (
+    "substep", "a", "b", "feature", "slot", "point", "normal", "depth", "push_a", "push_b",
+    "impulse", "tangent_impulse", "restitution",
+)
+
+
+@dataclass(frozen=True, eq=False)
+class Contacts:
+    """Every contact point of one step, ordered by (substep, a, b, slot).
+
+    substep: (m,) int32, sub-step index within the step (0 when the scene has no sub-steps).
+    a, b: (m,) int32 body indices, a < b.
+    feature: (m,) int32 contact feature id: ``((ref_side * 64 + ref_edge) * 64 + inc_edge)`` where
+        ref_side is 0 when the reference face belongs to a, 1 when to b. It keys warm starting and
+        the axis hysteresis between steps.
+    slot: (m,) int32, 0 or 1: which point of the pair's manifold (only 0 with one-point contacts).
+    point: (m, 2) world contact point (m) on the incident body's surface after the push-out.
+    normal: (m, 2) unit normal, from a towards b.
+    depth: (m,) penetration at this point before the push-out (m).
+    push_a, push_b: (m, 2) push-out displacement applied to a and b (m, world); zero when slot > 0.
+    impulse: (m,) normal impulse j >= 0 (N·s).
+    tangent_impulse: (m,) friction impulse along the tangent (N·s); 0 when friction is off.
+    restitution: (m,) the restitution e used for this contact (after the pair rule and threshold).
+    """
+
+    substep: np.ndarray
+    a: np.ndarray
+    b: np.ndarray
+    feature: np.ndarray
+    slot: np.ndarray
+    point: np.ndarray
+    normal: np.ndarray
+    depth: np.ndarray
+    push_a: np.ndarray
+    push_b: np.ndarray
+    impulse: np.ndarray
+    tangent_impulse: np.ndarray
+    restitution: np.ndarray
+
+    def __len__(self) -> int:
+        return int(self.a.shape[0])
+
+    @staticmethod
+    def empty() -> "Contacts":
+        i = np.zeros(0, dtype=np.int32)
+        f = np.zeros(0, dtype=np.float64)
+        v = np.zeros((0, 2), dtype=np.float64)
+        return Contacts(i, i, i, i, i, v, v, f, v, v, f, f, f)
+
+
+@dataclass(frozen=True, eq=False)
+class StepRecord:
+    """The state after step ``step`` and the contacts found while taking it.
+
+    step: index of the state; step 0 is the initial state (no contacts), step k the state after
+        k calls of ``Simulation.step``.
+    time: ``step * dt`` (s), computed from the index, never accumulated.
+    position: (n, 2) world position of each body's centre of mass (m).
+    angle: (n,) rotation of each body (rad, counter-clockwise), wrapped to [-pi, pi].
+    velocity: (n, 2) linear velocity of the centre of mass (m/s, world).
+    angular_velocity: (n,) angular velocity (rad/s, counter-clockwise positive).
+    exists: (n,) bool, whether each body is in the scene at ``time`` (the seed's Exist).
+    contacts: the contacts resolved while advancing from step-1 to step.
+    """
+
+    step: int
+    time: float
+    position: np.ndarray
+    angle: np.ndarray
+    velocity: np.ndarray
+    angular_velocity: np.ndarray
+    exists: np.ndarray
+    contacts: Contacts
