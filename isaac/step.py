@@ -1,0 +1,220 @@
+"""The step: one function that lists the stages in order.
+
+Order of a step (each of `substeps` sub-steps of h = dt / substeps runs all of it):
+
+1. geometry      world vertices, edge normals and boxes at the current pose
+2. broad phase   candidate pairs: MaxDist circles and boxes, sort-and-sweep (broad_phase.py)
+3. narrow phase  SAT: normal, MTD depth, contact points (narrow_phase.py)
+4. push-out      separate each pair along the normal by the MTD, by inverse mass (push_out.py)
+5. impulses      the seed's formula, or the sequential solver (impulse.py)
+6. integration   positions and angles; gravity (integrate.py)
+
+This is the seed's order (impulses, then integration with gravity) with the seed's implicit
+detection made explicit. One departure, chosen by `integrator`: semi-implicit Euler puts gravity
+into the velocities *before* the impulses (between 4 and 5), so a resting contact cancels gravity
+in the same step instead of letting bodies sink for a step; the seed's explicit Euler keeps
+gravity last. Existence (the seed's Exist) is evaluated from time = step * dt, never from a running
+sum of dt: a body takes part in a step when it exists at the step's start.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from isaac.broad_phase import find_pairs, speculative_reach
+from isaac.geometry import transform
+from isaac.impulse import RULE_CODES, solve_contacts
+from isaac.integrate import add_gravity, advance_positions
+from isaac.narrow_phase import collide_pairs
+from isaac.push_out import FULL, NONE, PARTIAL, push_out
+from isaac.records import Contacts
+from isaac.scene import WorldSettings
+from isaac.world import Model, State
+
+_CORRECTION = {"full": FULL, "partial": PARTIAL, "none": NONE}
+
+
+@dataclass(frozen=True)
+class StepSettings:
+    """WorldSettings turned into the plain numbers the compiled kernels take."""
+
+    gx: float
+    gy: float
+    h: float  # sub-step length (s)
+    substeps: int
+    explicit: bool
+    seed_solver: bool
+    iterations: int
+    warm_starting: bool
+    two_points: bool
+    correction_mode: int
+    slop: float
+    correction: float
+    restitution_rule: int
+    restitution_threshold: float
+    friction_on: bool
+    friction_rule: int
+    look_ahead: float  # s; 0 without ccd
+    gravity_reach: float  # m a body can gain from gravity in one sub-step
+    hysteresis: bool
+
+    @staticmethod
+    def of(world: WorldSettings) -> "StepSettings":
+        h = world.dt / world.substeps
+        g = float(np.hypot(world.gravity[0], world.gravity[1]))
+        speculative = world.ccd == "speculative"
+        return StepSettings(
+            gx=float(world.gravity[0]), gy=float(world.gravity[1]), h=h,
+            substeps=int(world.substeps), explicit=world.integrator == "explicit",
+            seed_solver=world.solver == "seed",
+            iterations=1 if world.solver == "seed" else int(world.iterations),
+            warm_starting=bool(world.warm_starting) and world.solver != "seed",
+            two_points=world.contact_points == 2,
+            correction_mode=_CORRECTION[world.position_correction], slop=float(world.slop),
+            correction=float(world.correction),
+            restitution_rule=RULE_CODES[world.restitution_rule],
+            restitution_threshold=float(world.restitution_threshold),
+            friction_on=bool(world.friction), friction_rule=RULE_CODES[world.friction_rule],
+            look_ahead=h if speculative else 0.0,
+            gravity_reach=g * h * h if speculative else 0.0,
+            hysteresis=bool(world.axis_hysteresis),
+        )
+
+
+class Workspace:
+    """Scratch arrays reused from step to step (grown when a step finds more pairs)."""
+
+    def __init__(self, model: Model, pair_capacity: int = 256) -> None:
+        n, width = model.vertices_local.shape[:2]
+        self.vertices = np.zeros((n, width, 2))
+        self.normals = np.zeros((n, width, 2))
+        self.aabb = np.zeros((n, 4))
+        self.expand = np.zeros(n)
+        self.movable = ~model.concrete
+        self._allocate(pair_capacity)
+
+    def _allocate(self, pairs: int) -> None:
+        self.pair_a = np.zeros(pairs, dtype=np.int64)
+        self.pair_b = np.zeros(pairs, dtype=np.int64)
+        rows = 2 * pairs
+        self.a = np.zeros(rows, dtype=np.int32)
+        self.b = np.zeros(rows, dtype=np.int32)
+        self.feature = np.zeros(rows, dtype=np.int32)
+        self.slot = np.zeros(rows, dtype=np.int32)
+        self.point = np.zeros((rows, 2))
+        self.normal = np.zeros((rows, 2))
+        self.depth = np.zeros(rows)
+        self.pair_depth = np.zeros(rows)
+        self.push_a = np.zeros((rows, 2))
+        self.push_b = np.zeros((rows, 2))
+        self.impulse = np.zeros(rows)
+        self.tangent = np.zeros(rows)
+        self.restitution = np.zeros(rows)
+
+    def grow(self, pairs: int) -> None:
+        self._allocate(max(pairs, 2 * self.pair_a.shape[0]))
+
+    def contacts(self, rows: int, substep: int) -> Contacts:
+        """Private copies of the first `rows` contact rows."""
+        return Contacts(
+            substep=np.full(rows, substep, dtype=np.int32), a=self.a[:rows].copy(),
+            b=self.b[:rows].copy(), feature=self.feature[:rows].copy(),
+            slot=self.slot[:rows].copy(), point=self.point[:rows].copy(),
+            normal=self.normal[:rows].copy(), depth=self.depth[:rows].copy(),
+            push_a=self.push_a[:rows].copy(), push_b=self.push_b[:rows].copy(),
+            impulse=self.impulse[:rows].copy(), tangent_impulse=self.tangent[:rows].copy(),
+            restitution=self.restitution[:rows].copy())
+
+
+@dataclass(frozen=True, eq=False)
+class ContactCache:
+    """Last sub-step's contacts, keyed for axis hysteresis and warm starting.
+
+    key: (m,) int64 a * n + b, ascending; the other arrays are the matching Contacts fields.
+    """
+
+    key: np.ndarray
+    feature: np.ndarray
+    slot: np.ndarray
+    impulse: np.ndarray
+    tangent: np.ndarray
+
+    @staticmethod
+    def of(contacts: Contacts, n_bodies: int) -> "ContactCache":
+        last = contacts.substep == (contacts.substep.max() if len(contacts) else 0)
+        key = contacts.a[last].astype(np.int64) * n_bodies + contacts.b[last]
+        return ContactCache(key, contacts.feature[last], contacts.slot[last],
+                            contacts.impulse[last], contacts.tangent_impulse[last])
+
+
+def detect(model: Model, cfg: StepSettings, state: State, work: Workspace,
+           cache: ContactCache) -> int:
+    """Stages 1-3: find the contacts at the current pose; returns the number of rows in `work`."""
+    # 1. geometry
+    transform(state.position, state.angle, state.exists, model.vertices_local,
+              model.normals_local, model.vertex_count, work.vertices, work.normals, work.aabb)
+    # 2. broad phase (grow the buffers and look again when they were too small)
+    speculative_reach(state.velocity, state.angular_velocity, model.radius, cfg.look_ahead,
+                      cfg.gravity_reach, work.expand)
+    while True:
+        pairs = find_pairs(state.position, model.radius, work.aabb, work.expand, work.movable,
+                           state.exists, work.pair_a, work.pair_b)
+        if pairs <= work.pair_a.shape[0]:
+            break
+        work.grow(pairs)
+    # 3. narrow phase
+    return collide_pairs(work.pair_a, work.pair_b, pairs, work.vertices, work.normals,
+                         model.vertex_count, model.radius, state.velocity,
+                         state.angular_velocity, cfg.look_ahead, cfg.gravity_reach,
+                         cfg.two_points, cfg.hysteresis, cache.key, cache.feature,
+                         work.a, work.b, work.feature, work.slot, work.point, work.normal,
+                         work.depth, work.pair_depth)
+
+
+def substep(model: Model, cfg: StepSettings, state: State, work: Workspace,
+            cache: ContactCache, index: int) -> Contacts:
+    """Advance the state by one sub-step of cfg.h seconds; return the contacts resolved."""
+    n = model.n_bodies
+    rows = detect(model, cfg, state, work, cache)
+    # 4. push-out
+    push_out(rows, work.a, work.b, work.feature, work.slot, work.point, work.normal,
+             work.pair_depth, model.inv_mass, state.position, cfg.correction_mode, cfg.slop,
+             cfg.correction, work.push_a, work.push_b)
+    # 5. impulses (semi-implicit Euler: gravity first, so contacts see it)
+    if not cfg.explicit:
+        add_gravity(state.velocity, work.movable, state.exists, cfg.gx, cfg.gy, cfg.h)
+    solve_contacts(rows, work.a, work.b, work.feature, work.slot, work.point, work.normal,
+                   work.depth, state.position, state.velocity, state.angular_velocity,
+                   model.inv_mass, model.inv_inertia, model.restitution, model.friction,
+                   cfg.restitution_rule, cfg.friction_rule, cfg.restitution_threshold,
+                   cfg.friction_on, cfg.seed_solver, cfg.iterations, cfg.warm_starting, cfg.h,
+                   n, cache.key, cache.feature, cache.slot, cache.impulse, cache.tangent,
+                   work.impulse, work.tangent, work.restitution)
+    # 6. integration (the seed's explicit Euler: gravity last)
+    advance_positions(state.position, state.angle, state.velocity, state.angular_velocity,
+                      work.movable, state.exists, cfg.h)
+    if cfg.explicit:
+        add_gravity(state.velocity, work.movable, state.exists, cfg.gx, cfg.gy, cfg.h)
+    return work.contacts(rows, index)
+
+
+def step(model: Model, cfg: StepSettings, dt: float, state: State, work: Workspace,
+         cache: ContactCache) -> tuple[Contacts, ContactCache]:
+    """Advance `state` in place from step k to k + 1; return its contacts and the new cache."""
+    parts = []
+    for index in range(cfg.substeps):
+        contacts = substep(model, cfg, state, work, cache, index)
+        cache = ContactCache.of(contacts, model.n_bodies)
+        parts.append(contacts)
+    state.step += 1
+    time = state.step * dt
+    state.exists[:] = (model.enters_at <= time) & (time < model.leaves_at)
+    return (parts[0] if len(parts) == 1 else concatenate(parts)), cache
+
+
+def concatenate(parts: list[Contacts]) -> Contacts:
+    """One Contacts of several sub-steps' rows, in sub-step order."""
+    fields = Contacts.__dataclass_fields__
+    return Contacts(**{f: np.concatenate([getattr(p, f) for p in parts]) for f in fields})

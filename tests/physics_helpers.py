@@ -1,0 +1,23 @@
+"""Tiny inline scenes for the physics tests (built from the dataclasses, no YAML)."""
+
+from __future__ import annotations
+
+from isaac.polygon import box_vertices
+from isaac.scene import PRESETS, BodySpec, Scene, WorldSettings
+
+
+def world(preset: str = "seed", **overrides) -> WorldSettings:
+    settings = dict(PRESETS[preset])
+    settings.update(fidelity=preset, gravity=(0.0, 0.0), dt=0.01, steps=100)
+    settings.update(overrides)
+    return WorldSettings(**settings)
+
+
+def box(name: str, width: float = 1.0, height: float = 1.0, **fields) -> BodySpec:
+    vertices = tuple((float(x), float(y)) for x, y in box_vertices(width, height))
+    return BodySpec(name=name, vertices=vertices, **fields)
+
+
+def scene(*bodies: BodySpec, name: str = "inline", **world_fields) -> Scene:
+    preset = world_fields.pop("preset", "seed")
+    return Scene(name=name, world=world(preset, **world_fields), bodies=tuple(bodies))
