@@ -30,7 +30,6 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from isaac.narrow_phase import find_previous
 
 # pair restitution rules (WorldSettings.restitution_rule)
 RULE_MAX = 0
@@ -56,63 +55,71 @@ def combine(rule, x, y):
     return np.sqrt(x * y)
 
 
-@numba.njit(cache=True)
-def _apply(a, b, px, py, rax, ray, rbx, rby, inv_mass, inv_inertia, velocity, angular_velocity):
-    """Apply impulse P = (px, py) (N s) as -P at a's point and +P at b's point."""
-    velocity[a, 0] -= px * inv_mass[a]
-    velocity[a, 1] -= py * inv_mass[a]
-    angular_velocity[a] -= (rax * py - ray * px) * inv_inertia[a]
-    velocity[b, 0] += px * inv_mass[b]
-    velocity[b, 1] += py * inv_mass[b]
-    angular_velocity[b] += (rbx * py - rby * px) * inv_inertia[b]
+# columns of the per-row table built once per solve (m, 1/kg, 1/(kg m^2), m/s)
+NX, NY, RAX, RAY, RBX, RBY, RNA, RNB, RTA, RTB = 0, 1, 2, 3, 4, 5, 6, 7, 8, 9
+IMA, IMB, IIA, IIB, KN, MN, KT, MT, TARGET, MU = 10, 11, 12, 13, 14, 15, 16, 17, 18, 19
+COLUMNS = 20
 
 
 @numba.njit(cache=True)
-def _relative_velocity(a, b, rax, ray, rbx, rby, velocity, angular_velocity):
-    """Velocity (m/s) of b's material point minus a's, at the contact (w x r = w (-r_y, r_x))."""
-    vx = (velocity[b, 0] - angular_velocity[b] * rby) - (velocity[a, 0] - angular_velocity[a] * ray)
-    vy = (velocity[b, 1] + angular_velocity[b] * rbx) - (velocity[a, 1] + angular_velocity[a] * rax)
-    return vx, vy
-
-
-@numba.njit(cache=True)
-def solve_contacts(rows, c_a, c_b, c_feature, c_slot, c_point, c_normal, c_depth,
+def solve_contacts(rows, c_a, c_b, c_point, c_normal, c_depth, c_previous,
                    position, velocity, angular_velocity, inv_mass, inv_inertia,
                    restitution, friction, restitution_rule, friction_rule, restitution_threshold,
-                   friction_on, seed_solver, iterations, warm_starting, h, n_bodies,
-                   prev_key, prev_feature, prev_slot, prev_impulse, prev_tangent,
-                   c_impulse, c_tangent, c_restitution):
-    """Resolve every contact row; writes the impulses applied (N s) and the restitution used."""
-    r_a = np.empty((rows, 2))
-    r_b = np.empty((rows, 2))
-    k_normal = np.empty(rows)
-    k_tangent = np.empty(rows)
-    target = np.empty(rows)
-    mu = np.empty(rows)
+                   friction_on, seed_solver, iterations, warm_starting, h,
+                   prev_impulse, prev_tangent, c_impulse, c_tangent, c_restitution):
+    """Resolve every contact row; writes the impulses applied (N s) and the restitution used.
+
+    Velocities are worked on as a packed copy (vx, vy, w) per body and written back at the end.
+    """
+    n = velocity.shape[0]
+    v = np.empty((n, 3))
+    for i in range(n):
+        v[i, 0] = velocity[i, 0]
+        v[i, 1] = velocity[i, 1]
+        v[i, 2] = angular_velocity[i]
+    rc = np.empty((rows, COLUMNS))
     for k in range(rows):
         a = c_a[k]
         b = c_b[k]
+        nx = c_normal[k, 0]
+        ny = c_normal[k, 1]
         rax = c_point[k, 0] - position[a, 0]
         ray = c_point[k, 1] - position[a, 1]
         rbx = c_point[k, 0] - position[b, 0]
         rby = c_point[k, 1] - position[b, 1]
-        r_a[k, 0] = rax
-        r_a[k, 1] = ray
-        r_b[k, 0] = rbx
-        r_b[k, 1] = rby
-        nx = c_normal[k, 0]
-        ny = c_normal[k, 1]
-        rna = rax * ny - ray * nx
+        rna = rax * ny - ray * nx  # r_ap x n
         rnb = rbx * ny - rby * nx
-        k_normal[k] = (inv_mass[a] + inv_mass[b] + rna * rna * inv_inertia[a]
-                       + rnb * rnb * inv_inertia[b])
-        rta = rax * nx + ray * ny  # r x t with t = (-n_y, n_x)
+        rta = rax * nx + ray * ny  # r_ap x t, t = (-n_y, n_x)
         rtb = rbx * nx + rby * ny
-        k_tangent[k] = (inv_mass[a] + inv_mass[b] + rta * rta * inv_inertia[a]
-                        + rtb * rtb * inv_inertia[b])
-        mu[k] = combine(friction_rule, friction[a], friction[b]) if friction_on else 0.0
-        vx, vy = _relative_velocity(a, b, rax, ray, rbx, rby, velocity, angular_velocity)
-        vn0 = vx * nx + vy * ny
+        ima = inv_mass[a]
+        imb = inv_mass[b]
+        iia = inv_inertia[a]
+        iib = inv_inertia[b]
+        # the seed's denominator: 1/m_a + 1/m_b + (r_ap x n)^2 / I_a + (r_bp x n)^2 / I_b
+        kn = ima + imb + rna * rna * iia + rnb * rnb * iib
+        kt = ima + imb + rta * rta * iia + rtb * rtb * iib
+        rc[k, NX] = nx
+        rc[k, NY] = ny
+        rc[k, RAX] = rax
+        rc[k, RAY] = ray
+        rc[k, RBX] = rbx
+        rc[k, RBY] = rby
+        rc[k, RNA] = rna
+        rc[k, RNB] = rnb
+        rc[k, RTA] = rta
+        rc[k, RTB] = rtb
+        rc[k, IMA] = ima
+        rc[k, IMB] = imb
+        rc[k, IIA] = iia
+        rc[k, IIB] = iib
+        rc[k, KN] = kn
+        rc[k, MN] = 1.0 / kn if kn > 0.0 else 0.0
+        rc[k, KT] = kt
+        rc[k, MT] = 1.0 / kt if kt > 0.0 else 0.0
+        rc[k, MU] = combine(friction_rule, friction[a], friction[b]) if friction_on else 0.0
+        # v_ab . n: normal velocity of b's point relative to a's, (w x r) . n = w (r x n)
+        vn0 = ((v[b, 0] - v[a, 0]) * nx + (v[b, 1] - v[a, 1]) * ny
+               + v[b, 2] * rnb - v[a, 2] * rna)
         gap = -c_depth[k]
         hits = vn0 < 0.0 if gap <= 0.0 else vn0 * h < -gap
         e = 0.0
@@ -120,99 +127,130 @@ def solve_contacts(rows, c_a, c_b, c_feature, c_slot, c_point, c_normal, c_depth
             e = combine(restitution_rule, restitution[a], restitution[b])
         c_restitution[k] = e
         if gap <= 0.0:
-            target[k] = -e * vn0
+            rc[k, TARGET] = -e * vn0
         elif hits:
-            target[k] = max(-gap / h, -e * vn0)
+            rc[k, TARGET] = max(-gap / h, -e * vn0)
         else:
-            target[k] = -gap / h
+            rc[k, TARGET] = -gap / h
         c_impulse[k] = 0.0
         c_tangent[k] = 0.0
 
     if seed_solver:
-        for k in range(rows):
-            a = c_a[k]
-            b = c_b[k]
-            if k_normal[k] <= 0.0:
-                continue
-            nx = c_normal[k, 0]
-            ny = c_normal[k, 1]
-            vx, vy = _relative_velocity(a, b, r_a[k, 0], r_a[k, 1], r_b[k, 0], r_b[k, 1],
-                                        velocity, angular_velocity)
-            vn = vx * nx + vy * ny
-            gap = -c_depth[k]
-            if gap <= 0.0:
-                if vn >= 0.0:
-                    continue
-                # the seed's formula, literally
-                j = -(1.0 + c_restitution[k]) * vn / k_normal[k]
-            else:
-                if vn >= target[k]:
-                    continue
-                j = (target[k] - vn) / k_normal[k]
-            _apply(a, b, j * nx, j * ny, r_a[k, 0], r_a[k, 1], r_b[k, 0], r_b[k, 1],
-                   inv_mass, inv_inertia, velocity, angular_velocity)
-            c_impulse[k] = j
-            if mu[k] > 0.0 and k_tangent[k] > 0.0:
-                vx, vy = _relative_velocity(a, b, r_a[k, 0], r_a[k, 1], r_b[k, 0], r_b[k, 1],
-                                            velocity, angular_velocity)
-                vt = -vx * ny + vy * nx
-                jt = -vt / k_tangent[k]
-                limit = mu[k] * j
-                jt = min(max(jt, -limit), limit)
-                _apply(a, b, -jt * ny, jt * nx, r_a[k, 0], r_a[k, 1], r_b[k, 0], r_b[k, 1],
-                       inv_mass, inv_inertia, velocity, angular_velocity)
-                c_tangent[k] = jt
-        return
+        _seed_pass(rows, c_a, c_b, c_depth, rc, v, c_restitution, c_impulse, c_tangent)
+    else:
+        if warm_starting:
+            for k in range(rows):
+                p = c_previous[k]
+                if p >= 0:
+                    c_impulse[k] = prev_impulse[p]
+                    c_tangent[k] = prev_tangent[p] if rc[k, MU] > 0.0 else 0.0
+                    _apply(c_a[k], c_b[k], k, c_impulse[k], c_tangent[k], rc, v)
+        for _ in range(iterations):
+            _sequential_pass(rows, c_a, c_b, rc, v, c_impulse, c_tangent)
 
-    if warm_starting and prev_key.shape[0] > 0:
-        for k in range(rows):
-            a = c_a[k]
-            b = c_b[k]
-            p = find_previous(prev_key, a * n_bodies + b)
-            if p < 0:
-                continue
-            key = prev_key[p]
-            while p < prev_key.shape[0] and prev_key[p] == key:
-                if prev_feature[p] == c_feature[k] and prev_slot[p] == c_slot[k]:
-                    pn = prev_impulse[p]
-                    pt = prev_tangent[p] if mu[k] > 0.0 else 0.0
-                    nx = c_normal[k, 0]
-                    ny = c_normal[k, 1]
-                    c_impulse[k] = pn
-                    c_tangent[k] = pt
-                    _apply(a, b, pn * nx - pt * ny, pn * ny + pt * nx, r_a[k, 0], r_a[k, 1],
-                           r_b[k, 0], r_b[k, 1], inv_mass, inv_inertia, velocity,
-                           angular_velocity)
-                    break
-                p += 1
+    for i in range(n):
+        velocity[i, 0] = v[i, 0]
+        velocity[i, 1] = v[i, 1]
+        angular_velocity[i] = v[i, 2]
 
-    for _ in range(iterations):
-        for k in range(rows):
-            if k_normal[k] <= 0.0:
+
+@numba.njit(cache=True)
+def _apply(a, b, k, jn, jt, rc, v):
+    """Apply normal impulse jn and tangent impulse jt (N s) of row k: -P to a, +P to b."""
+    nx = rc[k, NX]
+    ny = rc[k, NY]
+    px = jn * nx - jt * ny
+    py = jn * ny + jt * nx
+    v[a, 0] -= px * rc[k, IMA]
+    v[a, 1] -= py * rc[k, IMA]
+    v[a, 2] -= (jn * rc[k, RNA] + jt * rc[k, RTA]) * rc[k, IIA]
+    v[b, 0] += px * rc[k, IMB]
+    v[b, 1] += py * rc[k, IMB]
+    v[b, 2] += (jn * rc[k, RNB] + jt * rc[k, RTB]) * rc[k, IIB]
+
+
+@numba.njit(cache=True)
+def _seed_pass(rows, c_a, c_b, c_depth, rc, v, c_restitution, c_impulse, c_tangent):
+    """The seed: one pass, each contact's impulse from the velocities the previous ones left."""
+    for k in range(rows):
+        if rc[k, KN] <= 0.0:
+            continue
+        a = c_a[k]
+        b = c_b[k]
+        vn = ((v[b, 0] - v[a, 0]) * rc[k, NX] + (v[b, 1] - v[a, 1]) * rc[k, NY]
+              + v[b, 2] * rc[k, RNB] - v[a, 2] * rc[k, RNA])
+        if c_depth[k] >= 0.0:
+            if vn >= 0.0:
+                continue  # not approaching: the seed applies nothing
+            j = -(1.0 + c_restitution[k]) * vn / rc[k, KN]  # the seed's formula, literally
+        else:
+            if vn >= rc[k, TARGET]:
                 continue
-            a = c_a[k]
-            b = c_b[k]
-            nx = c_normal[k, 0]
-            ny = c_normal[k, 1]
-            rax = r_a[k, 0]
-            ray = r_a[k, 1]
-            rbx = r_b[k, 0]
-            rby = r_b[k, 1]
-            vx, vy = _relative_velocity(a, b, rax, ray, rbx, rby, velocity, angular_velocity)
-            vn = vx * nx + vy * ny
-            old = c_impulse[k]
-            new = max(old + (target[k] - vn) / k_normal[k], 0.0)
-            c_impulse[k] = new
-            dj = new - old
-            _apply(a, b, dj * nx, dj * ny, rax, ray, rbx, rby, inv_mass, inv_inertia,
-                   velocity, angular_velocity)
-            if mu[k] > 0.0:
-                vx, vy = _relative_velocity(a, b, rax, ray, rbx, rby, velocity, angular_velocity)
-                vt = -vx * ny + vy * nx
-                limit = mu[k] * new
-                old_t = c_tangent[k]
-                new_t = min(max(old_t - vt / k_tangent[k], -limit), limit)
-                c_tangent[k] = new_t
-                dt = new_t - old_t
-                _apply(a, b, -dt * ny, dt * nx, rax, ray, rbx, rby, inv_mass, inv_inertia,
-                       velocity, angular_velocity)
+            j = (rc[k, TARGET] - vn) / rc[k, KN]
+        _apply(a, b, k, j, 0.0, rc, v)
+        c_impulse[k] = j
+        if rc[k, MU] > 0.0 and rc[k, KT] > 0.0:
+            vt = (-(v[b, 0] - v[a, 0]) * rc[k, NY] + (v[b, 1] - v[a, 1]) * rc[k, NX]
+                  + v[b, 2] * rc[k, RTB] - v[a, 2] * rc[k, RTA])
+            limit = rc[k, MU] * j
+            jt = min(max(-vt / rc[k, KT], -limit), limit)
+            _apply(a, b, k, 0.0, jt, rc, v)
+            c_tangent[k] = jt
+
+
+@numba.njit(cache=True)
+def _sequential_pass(rows, c_a, c_b, rc, v, c_impulse, c_tangent):
+    """One Gauss-Seidel pass of accumulated, clamped impulses (Box2D-Lite's ApplyImpulse).
+
+    The two bodies' velocities are loaded once into locals and stored once per row.
+    """
+    for k in range(rows):
+        a = c_a[k]
+        b = c_b[k]
+        nx = rc[k, NX]
+        ny = rc[k, NY]
+        rna = rc[k, RNA]
+        rnb = rc[k, RNB]
+        ima = rc[k, IMA]
+        imb = rc[k, IMB]
+        iia = rc[k, IIA]
+        iib = rc[k, IIB]
+        vax = v[a, 0]
+        vay = v[a, 1]
+        wa = v[a, 2]
+        vbx = v[b, 0]
+        vby = v[b, 1]
+        wb = v[b, 2]
+        vn = (vbx - vax) * nx + (vby - vay) * ny + wb * rnb - wa * rna
+        old = c_impulse[k]
+        new = max(old + (rc[k, TARGET] - vn) * rc[k, MN], 0.0)
+        c_impulse[k] = new
+        dj = new - old
+        vax -= dj * nx * ima
+        vay -= dj * ny * ima
+        wa -= dj * rna * iia
+        vbx += dj * nx * imb
+        vby += dj * ny * imb
+        wb += dj * rnb * iib
+        mu = rc[k, MU]
+        if mu > 0.0:
+            rta = rc[k, RTA]
+            rtb = rc[k, RTB]
+            vt = -(vbx - vax) * ny + (vby - vay) * nx + wb * rtb - wa * rta
+            limit = mu * new
+            old_t = c_tangent[k]
+            new_t = min(max(old_t - vt * rc[k, MT], -limit), limit)
+            c_tangent[k] = new_t
+            dt = new_t - old_t
+            vax += dt * ny * ima
+            vay -= dt * nx * ima
+            wa -= dt * rta * iia
+            vbx -= dt * ny * imb
+            vby += dt * nx * imb
+            wb += dt * rtb * iib
+        v[a, 0] = vax
+        v[a, 1] = vay
+        v[a, 2] = wa
+        v[b, 0] = vbx
+        v[b, 1] = vby
+        v[b, 2] = wb

@@ -72,39 +72,47 @@ def max_separation(verts_r, normals_r, count_r, verts_i, count_i, limit):
 
 
 @numba.njit(cache=True)
-def find_previous(prev_key, key):
-    """Index of the first row with this pair key in the previous contacts (sorted), or -1."""
-    lo = 0
-    hi = prev_key.shape[0]
-    while lo < hi:
-        mid = (lo + hi) // 2
-        if prev_key[mid] < key:
-            lo = mid + 1
-        else:
-            hi = mid
-    if lo < prev_key.shape[0] and prev_key[lo] == key:
-        return lo
+def _previous_row(first, prev_key, prev_feature, prev_slot, feature, slot):
+    """The previous step's row of this pair (starting at `first`) with the same feature and
+    slot, or -1: the same contact point, whose impulse warm-starts this one."""
+    if first < 0:
+        return -1
+    k = first
+    while k < prev_key.shape[0] and prev_key[k] == prev_key[first]:
+        if prev_feature[k] == feature and prev_slot[k] == slot:
+            return k
+        k += 1
     return -1
 
 
 @numba.njit(cache=True)
 def collide_pairs(pair_a, pair_b, n_pairs, vertices, normals, vertex_count, radius,
                   velocity, angular_velocity, margin_time, margin_extra, two_points, hysteresis,
-                  prev_key, prev_feature,
-                  c_a, c_b, c_feature, c_slot, c_point, c_normal, c_depth, c_pair_depth):
+                  prev_key, prev_feature, prev_slot,
+                  c_a, c_b, c_feature, c_slot, c_point, c_normal, c_depth, c_pair_depth,
+                  c_previous):
     """Contacts of every candidate pair, written row by row in pair order; returns the row count.
 
     margin_time: time (s) over which speculative contacts look ahead (0 turns ccd off);
     margin_extra: extra speculative distance (m), e.g. what gravity adds in one step.
     A pair's speculative margin is margin_time * (|v_b - v_a| + |w_a| r_a + |w_b| r_b) + extra.
     Rows: c_depth is the penetration of that point (m; negative = gap of a speculative point) and
-    c_pair_depth the pair's MTD depth, used by the push-out.
+    c_pair_depth the pair's MTD depth, used by the push-out. c_previous is the index of the
+    previous step's row with the same pair, feature and slot (for warm starting), or -1.
+    prev_key (the previous rows' a * n + b) is ascending, like the pairs, so one forward walk
+    finds every pair's previous rows.
     """
     n = vertex_count.shape[0]
+    n_prev = prev_key.shape[0]
+    q = 0
     rows = 0
     for p in range(n_pairs):
         a = pair_a[p]
         b = pair_b[p]
+        key = a * n + b
+        while q < n_prev and prev_key[q] < key:
+            q += 1
+        prev = q if q < n_prev and prev_key[q] == key else -1
         va = vertices[a]
         na = normals[a]
         ca = vertex_count[a]
@@ -136,7 +144,6 @@ def collide_pairs(pair_a, pair_b, n_pairs, vertices, normals, vertex_count, radi
                 ref_side = 1
                 ref_edge = edge_b
                 ref_sep = sep_b
-            prev = find_previous(prev_key, a * n + b)
             if prev >= 0:
                 f = prev_feature[prev]
                 side = f // 4096
@@ -278,6 +285,8 @@ def collide_pairs(pair_a, pair_b, n_pairs, vertices, normals, vertex_count, radi
                 c_normal[rows, 1] = outy
                 c_depth[rows] = -s
                 c_pair_depth[rows] = pair_depth
+                c_previous[rows] = _previous_row(prev, prev_key, prev_feature, prev_slot,
+                                                 feature, slot)
                 rows += 1
                 slot += 1
         else:
@@ -309,5 +318,6 @@ def collide_pairs(pair_a, pair_b, n_pairs, vertices, normals, vertex_count, radi
             c_normal[rows, 1] = outy
             c_depth[rows] = pair_depth
             c_pair_depth[rows] = pair_depth
+            c_previous[rows] = _previous_row(prev, prev_key, prev_feature, prev_slot, feature, 0)
             rows += 1
     return rows

@@ -107,6 +107,7 @@ class Workspace:
         self.normal = np.zeros((rows, 2))
         self.depth = np.zeros(rows)
         self.pair_depth = np.zeros(rows)
+        self.previous = np.zeros(rows, dtype=np.int64)
         self.push_a = np.zeros((rows, 2))
         self.push_b = np.zeros((rows, 2))
         self.impulse = np.zeros(rows)
@@ -168,15 +169,14 @@ def detect(model: Model, cfg: StepSettings, state: State, work: Workspace,
     return collide_pairs(work.pair_a, work.pair_b, pairs, work.vertices, work.normals,
                          model.vertex_count, model.radius, state.velocity,
                          state.angular_velocity, cfg.look_ahead, cfg.gravity_reach,
-                         cfg.two_points, cfg.hysteresis, cache.key, cache.feature,
+                         cfg.two_points, cfg.hysteresis, cache.key, cache.feature, cache.slot,
                          work.a, work.b, work.feature, work.slot, work.point, work.normal,
-                         work.depth, work.pair_depth)
+                         work.depth, work.pair_depth, work.previous)
 
 
 def substep(model: Model, cfg: StepSettings, state: State, work: Workspace,
             cache: ContactCache, index: int) -> Contacts:
     """Advance the state by one sub-step of cfg.h seconds; return the contacts resolved."""
-    n = model.n_bodies
     rows = detect(model, cfg, state, work, cache)
     # 4. push-out
     push_out(rows, work.a, work.b, work.feature, work.slot, work.point, work.normal,
@@ -185,13 +185,12 @@ def substep(model: Model, cfg: StepSettings, state: State, work: Workspace,
     # 5. impulses (semi-implicit Euler: gravity first, so contacts see it)
     if not cfg.explicit:
         add_gravity(state.velocity, work.movable, state.exists, cfg.gx, cfg.gy, cfg.h)
-    solve_contacts(rows, work.a, work.b, work.feature, work.slot, work.point, work.normal,
-                   work.depth, state.position, state.velocity, state.angular_velocity,
+    solve_contacts(rows, work.a, work.b, work.point, work.normal, work.depth, work.previous,
+                   state.position, state.velocity, state.angular_velocity,
                    model.inv_mass, model.inv_inertia, model.restitution, model.friction,
                    cfg.restitution_rule, cfg.friction_rule, cfg.restitution_threshold,
                    cfg.friction_on, cfg.seed_solver, cfg.iterations, cfg.warm_starting, cfg.h,
-                   n, cache.key, cache.feature, cache.slot, cache.impulse, cache.tangent,
-                   work.impulse, work.tangent, work.restitution)
+                   cache.impulse, cache.tangent, work.impulse, work.tangent, work.restitution)
     # 6. integration (the seed's explicit Euler: gravity last)
     advance_positions(state.position, state.angle, state.velocity, state.angular_velocity,
                       work.movable, state.exists, cfg.h)
