@@ -45,3 +45,23 @@ def advance_positions(position, angle, velocity, angular_velocity, movable, exis
             while a < -PI:
                 a += TWO_PI
             angle[i] = a
+
+
+@numba.njit(cache=True)
+def first_diverged(position, angle, velocity, angular_velocity, exists, position_limit,
+                   speed_limit, angle_limit):
+    """(body index, field code) of the first existing body whose state is NaN, infinite or
+    beyond the limits (m, m/s and rad/s, rad), or (-1, -1). Field codes: 0 position,
+    1 velocity, 2 angle, 3 angular velocity. `not (x <= limit)` is also true for NaN."""
+    for i in range(position.shape[0]):
+        if not exists[i]:
+            continue
+        if not (abs(position[i, 0]) <= position_limit and abs(position[i, 1]) <= position_limit):
+            return i, 0
+        if not (abs(velocity[i, 0]) <= speed_limit and abs(velocity[i, 1]) <= speed_limit):
+            return i, 1
+        if not abs(angle[i]) <= angle_limit:
+            return i, 2
+        if not abs(angular_velocity[i]) <= speed_limit:
+            return i, 3
+    return -1, -1

@@ -23,56 +23,62 @@ NONE = 2
 
 @numba.njit(cache=True)
 def push_out(rows, c_a, c_b, c_feature, c_slot, c_point, c_normal, c_pair_depth, inv_mass,
-             position, mode, slop, correction, c_push_a, c_push_b):
-    """Apply the push of each pair (on its slot-0 row) to `position` in place.
+             position, mode, slop, correction, iterations, c_push_a, c_push_b):
+    """Push each pair apart (on its slot-0 row) in `iterations` passes; positions in place.
 
-    Writes push_a / push_b (m, world) per row (zero on slot > 0 rows) and moves every row's point
-    with its incident body (feature // 4096 == 0: the reference face is a's, the point is on b).
+    The depth a pair still has after earlier pushes in this stage is its MTD depth minus how far
+    the pushes have already moved b away from a along n: d = d0 - ((x_b - x_b0) - (x_a - x_a0)) . n
+    (exact for the translations the push applies), so later passes only push what is left and a
+    stack's push propagates through it. One pass is the seed's push.
+    Writes push_a / push_b (m, world) per row, the total over the passes (zero on slot > 0 rows),
+    and moves every row's point with its incident body (feature // 4096 == 0: the reference face
+    is a's, the point is on b).
     """
-    pa_x = 0.0
-    pa_y = 0.0
-    pb_x = 0.0
-    pb_y = 0.0
+    n = position.shape[0]
+    start = position.copy()
     for k in range(rows):
-        a = c_a[k]
-        b = c_b[k]
-        if c_slot[k] == 0:
-            pa_x = 0.0
-            pa_y = 0.0
-            pb_x = 0.0
-            pb_y = 0.0
-            d = c_pair_depth[k]
+        c_push_a[k, 0] = 0.0
+        c_push_a[k, 1] = 0.0
+        c_push_b[k, 0] = 0.0
+        c_push_b[k, 1] = 0.0
+    for _ in range(iterations):
+        for k in range(rows):
+            if c_slot[k] != 0:
+                continue
+            a = c_a[k]
+            b = c_b[k]
+            w = inv_mass[a] + inv_mass[b]
+            if w <= 0.0:
+                continue
+            nx = c_normal[k, 0]
+            ny = c_normal[k, 1]
+            moved = ((position[b, 0] - start[b, 0] - position[a, 0] + start[a, 0]) * nx
+                     + (position[b, 1] - start[b, 1] - position[a, 1] + start[a, 1]) * ny)
+            d = c_pair_depth[k] - moved
             if mode == PARTIAL:
                 d = correction * (d - slop)
             elif mode == NONE:
                 d = 0.0
-            w = inv_mass[a] + inv_mass[b]
-            if d > 0.0 and w > 0.0:
-                nx = c_normal[k, 0]
-                ny = c_normal[k, 1]
-                share_a = d * inv_mass[a] / w
-                share_b = d * inv_mass[b] / w
-                pa_x = -nx * share_a
-                pa_y = -ny * share_a
-                pb_x = nx * share_b
-                pb_y = ny * share_b
-                position[a, 0] += pa_x
-                position[a, 1] += pa_y
-                position[b, 0] += pb_x
-                position[b, 1] += pb_y
-            c_push_a[k, 0] = pa_x
-            c_push_a[k, 1] = pa_y
-            c_push_b[k, 0] = pb_x
-            c_push_b[k, 1] = pb_y
-        else:
-            c_push_a[k, 0] = 0.0
-            c_push_a[k, 1] = 0.0
-            c_push_b[k, 0] = 0.0
-            c_push_b[k, 1] = 0.0
-        # the point belongs to the incident body (b when a's face is the reference)
+            if d <= 0.0:
+                continue
+            share_a = d * inv_mass[a] / w
+            share_b = d * inv_mass[b] / w
+            position[a, 0] -= nx * share_a
+            position[a, 1] -= ny * share_a
+            position[b, 0] += nx * share_b
+            position[b, 1] += ny * share_b
+            c_push_a[k, 0] -= nx * share_a
+            c_push_a[k, 1] -= ny * share_a
+            c_push_b[k, 0] += nx * share_b
+            c_push_b[k, 1] += ny * share_b
+    # the points belong to the incident body (b when a's face is the reference)
+    first = 0
+    for k in range(rows):
+        if c_slot[k] == 0:
+            first = k
         if c_feature[k] // 4096 == 0:
-            c_point[k, 0] += pb_x
-            c_point[k, 1] += pb_y
+            c_point[k, 0] += c_push_b[first, 0]
+            c_point[k, 1] += c_push_b[first, 1]
         else:
-            c_point[k, 0] += pa_x
-            c_point[k, 1] += pa_y
+            c_point[k, 0] += c_push_a[first, 0]
+            c_point[k, 1] += c_push_a[first, 1]

@@ -10,12 +10,15 @@ import numpy as np
 from isaac.errors import SimulationError
 from isaac.records import Contacts, StepRecord
 from isaac.scene import Scene
+from isaac.integrate import first_diverged
 from isaac.step import ContactCache, StepSettings, Workspace, detect, step
 from isaac.world import Model, State, build_model, initial_state
 
 # Beyond these the state has diverged (a 1 km body at 1e6 m moving at 1e4 m/s is far inside).
 DIVERGED_POSITION = 1e12  # m
 DIVERGED_SPEED = 1e12  # m/s or rad/s
+DIVERGED_ANGLE = 8.0  # rad: wrapped angles stay within pi
+_FIELDS = ("position", "velocity", "angle", "angular velocity")
 
 
 class Simulation:
@@ -36,13 +39,10 @@ class Simulation:
             self.state: State = initial_state(scene, self.model)
             self._contacts = Contacts.empty()
         else:
-            self.state = State(int(start.step), np.array(start.position, dtype=np.float64),
-                               np.array(start.angle, dtype=np.float64),
-                               np.array(start.velocity, dtype=np.float64),
-                               np.array(start.angular_velocity, dtype=np.float64),
-                               np.array(start.exists, dtype=bool))
+            self._restore(start)
             self._contacts = start.contacts
         self._cache = ContactCache.of(self._contacts, self.model.n_bodies)
+        self._last = self.record()
 
     @property
     def n_bodies(self) -> int:
@@ -72,15 +72,22 @@ class Simulation:
         Raises SimulationError (naming the step and body) if the state becomes NaN, infinite or
         absurdly large; the state before the failing step is what `record()` returned last.
         """
-        before = self.state.copy()
         contacts, cache = step(self.model, self.settings, self.scene.world.dt, self.state,
                                self._work, self._cache)
-        bad = self._diverged()
-        if bad is not None:
-            self.state = before
-            raise SimulationError(bad, step=before.step + 1)
+        s = self.state
+        body, field = first_diverged(s.position, s.angle, s.velocity, s.angular_velocity,
+                                     s.exists, DIVERGED_POSITION, DIVERGED_SPEED, DIVERGED_ANGLE)
+        if body >= 0:
+            failed = s.step
+            self._restore(self._last)
+            name = self.model.names[body]
+            raise SimulationError(
+                f"step {failed}: body {name!r} (index {body}) has a non-finite or diverged "
+                f"{_FIELDS[field]}; the simulation stopped (try a smaller dt or more substeps)",
+                step=failed, body=name)
         self._contacts, self._cache = contacts, cache
-        return self.record()
+        self._last = self.record()
+        return self._last
 
     def run(self, steps: int | None = None) -> Iterator[StepRecord]:
         """Yield the records of the next `steps` steps (default: the scene's `world.steps`)."""
@@ -107,21 +114,12 @@ class Simulation:
         except ValueError:
             raise KeyError(f"no body named {name!r}") from None
 
-    def _diverged(self) -> str | None:
-        s = self.state
-        fields = (("position", np.abs(s.position).max(axis=1), DIVERGED_POSITION),
-                  ("velocity", np.abs(s.velocity).max(axis=1), DIVERGED_SPEED),
-                  ("angle", np.abs(s.angle), 8.0),
-                  ("angular velocity", np.abs(s.angular_velocity), DIVERGED_SPEED))
-        for field, magnitude, limit in fields:
-            # not (x <= limit) is also true for NaN
-            bad = np.flatnonzero(~(magnitude <= limit))
-            if bad.size:
-                i = int(bad[0])
-                return (f"step {s.step}: body {self.model.names[i]!r} (index {i}) has a "
-                        f"non-finite or diverged {field}; the simulation stopped (try a smaller "
-                        f"dt or more substeps)")
-        return None
+    def _restore(self, record: StepRecord) -> None:
+        self.state = State(int(record.step), np.array(record.position, dtype=np.float64),
+                           np.array(record.angle, dtype=np.float64),
+                           np.array(record.velocity, dtype=np.float64),
+                           np.array(record.angular_velocity, dtype=np.float64),
+                           np.array(record.exists, dtype=bool))
 
 
 @dataclass(frozen=True)

@@ -52,6 +52,7 @@ class StepSettings:
     correction_mode: int
     slop: float
     correction: float
+    position_iterations: int
     restitution_rule: int
     restitution_threshold: float
     friction_on: bool
@@ -74,6 +75,7 @@ class StepSettings:
             two_points=world.contact_points == 2,
             correction_mode=_CORRECTION[world.position_correction], slop=float(world.slop),
             correction=float(world.correction),
+            position_iterations=int(world.position_iterations),
             restitution_rule=RULE_CODES[world.restitution_rule],
             restitution_threshold=float(world.restitution_threshold),
             friction_on=bool(world.friction), friction_rule=RULE_CODES[world.friction_rule],
@@ -144,10 +146,12 @@ class ContactCache:
 
     @staticmethod
     def of(contacts: Contacts, n_bodies: int) -> "ContactCache":
-        last = contacts.substep == (contacts.substep.max() if len(contacts) else 0)
-        key = contacts.a[last].astype(np.int64) * n_bodies + contacts.b[last]
-        return ContactCache(key, contacts.feature[last], contacts.slot[last],
-                            contacts.impulse[last], contacts.tangent_impulse[last])
+        c = contacts
+        if len(c) and c.substep[-1] != c.substep[0]:
+            last = c.substep == c.substep[-1]
+            c = Contacts(**{f: getattr(c, f)[last] for f in Contacts.__dataclass_fields__})
+        key = c.a.astype(np.int64) * n_bodies + c.b
+        return ContactCache(key, c.feature, c.slot, c.impulse, c.tangent_impulse)
 
 
 def detect(model: Model, cfg: StepSettings, state: State, work: Workspace,
@@ -181,7 +185,7 @@ def substep(model: Model, cfg: StepSettings, state: State, work: Workspace,
     # 4. push-out
     push_out(rows, work.a, work.b, work.feature, work.slot, work.point, work.normal,
              work.pair_depth, model.inv_mass, state.position, cfg.correction_mode, cfg.slop,
-             cfg.correction, work.push_a, work.push_b)
+             cfg.correction, cfg.position_iterations, work.push_a, work.push_b)
     # 5. impulses (semi-implicit Euler: gravity first, so contacts see it)
     if not cfg.explicit:
         add_gravity(state.velocity, work.movable, state.exists, cfg.gx, cfg.gy, cfg.h)
@@ -208,8 +212,9 @@ def step(model: Model, cfg: StepSettings, dt: float, state: State, work: Workspa
         cache = ContactCache.of(contacts, model.n_bodies)
         parts.append(contacts)
     state.step += 1
-    time = state.step * dt
-    state.exists[:] = (model.enters_at <= time) & (time < model.leaves_at)
+    if model.timed:
+        time = state.step * dt
+        state.exists[:] = (model.enters_at <= time) & (time < model.leaves_at)
     return (parts[0] if len(parts) == 1 else concatenate(parts)), cache
 
 

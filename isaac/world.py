@@ -38,6 +38,7 @@ class Model:
     concrete: (n,) bool, immovable (the seed's IsConcrete).
     enters_at, leaves_at: (n,) s; the body exists while enters_at <= step * dt < leaves_at
         (leaves_at is +inf for a body that never leaves).
+    timed: whether any body enters after time 0 or ever leaves (existence can change).
     """
 
     names: tuple[str, ...]
@@ -54,6 +55,7 @@ class Model:
     concrete: np.ndarray
     enters_at: np.ndarray
     leaves_at: np.ndarray
+    timed: bool
 
     @property
     def n_bodies(self) -> int:
@@ -132,6 +134,9 @@ def build_model(scene: Scene) -> Model:
     concrete = np.array([b.concrete for b in scene.bodies], dtype=bool)
     inv_mass = np.where(concrete, 0.0, 1.0 / mass)
     inv_inertia = np.where(concrete, 0.0, 1.0 / inertia)
+    enters_at = np.array([b.enters_at for b in scene.bodies], dtype=np.float64)
+    leaves_at = np.array([np.inf if b.leaves_at is None else b.leaves_at
+                          for b in scene.bodies], dtype=np.float64)
     return Model(
         names=tuple(b.name for b in scene.bodies),
         vertices_local=verts,
@@ -145,9 +150,9 @@ def build_model(scene: Scene) -> Model:
         restitution=np.array([b.restitution for b in scene.bodies], dtype=np.float64),
         friction=np.array([b.friction for b in scene.bodies], dtype=np.float64),
         concrete=concrete,
-        enters_at=np.array([b.enters_at for b in scene.bodies], dtype=np.float64),
-        leaves_at=np.array([np.inf if b.leaves_at is None else b.leaves_at
-                            for b in scene.bodies], dtype=np.float64),
+        enters_at=enters_at,
+        leaves_at=leaves_at,
+        timed=bool(np.any(enters_at > 0.0) or np.any(np.isfinite(leaves_at))),
     )
 
 
