@@ -189,7 +189,8 @@ def substep(model: Model, cfg: StepSettings, state: State, work: Workspace,
     # 5. impulses (semi-implicit Euler: gravity first, so contacts see it)
     if not cfg.explicit:
         add_gravity(state.velocity, work.movable, state.exists, cfg.gx, cfg.gy, cfg.h)
-    solve_contacts(rows, work.a, work.b, work.point, work.normal, work.depth, work.previous,
+    solve_contacts(rows, work.a, work.b, work.slot, work.point, work.normal, work.depth,
+                   work.previous,
                    state.position, state.velocity, state.angular_velocity,
                    model.inv_mass, model.inv_inertia, model.restitution, model.friction,
                    cfg.restitution_rule, cfg.friction_rule, cfg.restitution_threshold,
