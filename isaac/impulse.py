@@ -69,12 +69,17 @@ MAX_CONDITION = 1000.0
 
 @numba.njit(cache=True)
 def solve_contacts(rows, c_a, c_b, c_slot, c_point, c_normal, c_depth, c_previous,
-                   position, velocity, angular_velocity, inv_mass, inv_inertia,
+                   position, velocity, angular_velocity, inv_mass, inv_inertia, gravity_dv,
                    restitution, friction, restitution_rule, friction_rule, restitution_threshold,
                    friction_on, seed_solver, iterations, warm_starting, h,
                    prev_impulse, prev_tangent, c_impulse, c_tangent, c_restitution):
     """Resolve every contact row; writes the impulses applied (N s) and the restitution used.
 
+    gravity_dv: (2,) velocity (m/s) gravity added to every moving body just before this solve
+    (g h with semi-implicit Euler, zero with explicit). The bounce is computed from the approach
+    velocity the bodies *arrived* with, without it: a resting body (arrived at 0) does not bounce
+    off the gravity of its own step, and a falling body bounces back with the speed it hit with;
+    reflecting the gravity increment too gained about 0.4 % of the energy per bounce.
     Velocities are worked on as a packed copy (vx, vy, w) per body and written back at the end.
     """
     n = velocity.shape[0]
@@ -122,16 +127,20 @@ def solve_contacts(rows, c_a, c_b, c_slot, c_point, c_normal, c_depth, c_previou
         # v_ab . n: normal velocity of b's point relative to a's, (w x r) . n = w (r x n)
         vn0 = ((v[b, 0] - v[a, 0]) * nx + (v[b, 1] - v[a, 1]) * ny
                + v[b, 2] * rnb - v[a, 2] * rna)
+        # the approach velocity the pair arrived with: without this step's gravity, which moved
+        # each moving body by gravity_dv (no relative change between two moving bodies)
+        moved = (1.0 if imb > 0.0 else 0.0) - (1.0 if ima > 0.0 else 0.0)
+        arrived = vn0 - moved * (gravity_dv[0] * nx + gravity_dv[1] * ny)
         gap = -c_depth[k]
         hits = vn0 < 0.0 if gap <= 0.0 else vn0 * h < -gap
         e = 0.0
-        if hits and -vn0 >= restitution_threshold:
+        if hits and arrived < 0.0 and -arrived >= restitution_threshold:
             e = combine(restitution_rule, restitution[a], restitution[b])
         c_restitution[k] = e
         if gap <= 0.0:
-            rc[k, TARGET] = -e * vn0
+            rc[k, TARGET] = -e * arrived
         elif hits:
-            rc[k, TARGET] = max(-gap / h, -e * vn0)
+            rc[k, TARGET] = max(-gap / h, -e * arrived)
         else:
             rc[k, TARGET] = -gap / h
         c_impulse[k] = 0.0

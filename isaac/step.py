@@ -57,6 +57,7 @@ class StepSettings:
     restitution_threshold: float
     friction_on: bool
     friction_rule: int
+    gravity_dv: np.ndarray  # (2,) m/s gravity adds before the impulses (semi-implicit), else 0
     look_ahead: float  # s; 0 without ccd
     gravity_reach: float  # m a body can gain from gravity in one sub-step
     hysteresis: bool
@@ -79,6 +80,8 @@ class StepSettings:
             restitution_rule=RULE_CODES[world.restitution_rule],
             restitution_threshold=float(world.restitution_threshold),
             friction_on=bool(world.friction), friction_rule=RULE_CODES[world.friction_rule],
+            gravity_dv=(np.zeros(2) if world.integrator == "explicit"
+                        else np.array([world.gravity[0] * h, world.gravity[1] * h])),
             look_ahead=h if speculative else 0.0,
             gravity_reach=g * h * h if speculative else 0.0,
             hysteresis=bool(world.axis_hysteresis),
@@ -192,7 +195,8 @@ def substep(model: Model, cfg: StepSettings, state: State, work: Workspace,
     solve_contacts(rows, work.a, work.b, work.slot, work.point, work.normal, work.depth,
                    work.previous,
                    state.position, state.velocity, state.angular_velocity,
-                   model.inv_mass, model.inv_inertia, model.restitution, model.friction,
+                   model.inv_mass, model.inv_inertia, cfg.gravity_dv, model.restitution,
+                   model.friction,
                    cfg.restitution_rule, cfg.friction_rule, cfg.restitution_threshold,
                    cfg.friction_on, cfg.seed_solver, cfg.iterations, cfg.warm_starting, cfg.h,
                    cache.impulse, cache.tangent, work.impulse, work.tangent, work.restitution)
