@@ -38,12 +38,15 @@ def cmd_check(args: argparse.Namespace) -> int:
     return 0
 
 
-class _Terminated(Exception):
-    """SIGTERM, turned into an exception so the run can finish its files cleanly."""
+class _StopRequest:
+    """Ctrl-C or SIGTERM, noted by the handler and acted on between steps, so a step and its
+    records (MCAP and Rerun alike) are always written whole before the files are closed."""
 
+    def __init__(self) -> None:
+        self.signal: int | None = None
 
-def _on_sigterm(signum, frame):  # pragma: no cover - exercised through a subprocess
-    raise _Terminated()
+    def __call__(self, signum, frame) -> None:  # pragma: no cover - exercised via a subprocess
+        self.signal = signum
 
 
 def cmd_run(args: argparse.Namespace) -> int:
@@ -77,12 +80,18 @@ def cmd_run(args: argparse.Namespace) -> int:
     if not args.quiet and sys.stderr.isatty():
         from tqdm import tqdm
         progress = tqdm(total=steps, unit="step", desc=scene.name, leave=False)
-    previous_handler = signal.signal(signal.SIGTERM, _on_sigterm)
+    stop = _StopRequest()
+    previous = {sig: signal.signal(sig, stop) for sig in (signal.SIGTERM, signal.SIGINT)}
     stopped = None
+    finished = False
     first_step_at = None
     loop_start = time.perf_counter()
     try:
         for _ in range(steps):
+            if stop.signal is not None:
+                name = signal.Signals(stop.signal).name
+                stopped = ("interrupted", f"{name} after step {sim.step_index}")
+                break
             last = sim.step()
             if first_step_at is None:
                 first_step_at = time.perf_counter()
@@ -94,19 +103,20 @@ def cmd_run(args: argparse.Namespace) -> int:
                 max_depth = max(max_depth, float(last.contacts.depth.max()))
             if progress:
                 progress.update(1)
+        finished = stopped is None
     except SimulationError as exc:
         stopped = ("error", str(exc))
-    except (KeyboardInterrupt, _Terminated):
-        stopped = ("interrupted", f"interrupted after step {sim.step_index}")
     finally:
-        signal.signal(signal.SIGTERM, previous_handler)
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
         if progress:
             progress.close()
         if recorder:
-            if stopped:
-                recorder.close(complete=False, stopped_at=sim.step_index, reason=stopped[1])
-            else:
+            if finished:
                 recorder.close(complete=True)
+            else:
+                reason = stopped[1] if stopped else "the run failed"
+                recorder.close(complete=False, stopped_at=sim.step_index, reason=reason)
     taken = last.step - first.step
     # the first step also loads (or compiles) the kernels: the rate is measured after it
     timed_steps = taken - 1
@@ -137,5 +147,5 @@ def cmd_run(args: argparse.Namespace) -> int:
 
 
 def _energy(sim, record) -> float:
-    return (diagnostics.kinetic_energy(sim.model, record)
-            + diagnostics.potential_energy(sim.model, record, sim.scene.world.gravity))
+    totals = diagnostics.summary(sim.model, record, sim.scene.world.gravity)
+    return totals.kinetic_energy + totals.potential_energy

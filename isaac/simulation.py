@@ -35,13 +35,23 @@ class Simulation:
         self.model: Model = build_model(scene)
         self.settings = StepSettings.of(scene.world)
         self._work = Workspace(self.model)
-        if start is None:
-            self.state: State = initial_state(scene, self.model)
-            self._contacts = Contacts.empty()
-        else:
-            self._restore(start)
-            self._contacts = start.contacts
+        self.state: State = initial_state(scene, self.model)
+        self._contacts = Contacts.empty()
         self._cache = ContactCache.of(self._contacts, self.model.n_bodies)
+        self._last = self.record()
+        if start is not None:
+            self.resume(start)
+
+    def resume(self, record: StepRecord) -> None:
+        """Continue from a record of this scene (a logged keyframe), keeping the model.
+
+        The record's state and its contacts (feature ids and impulses, which the next step reads
+        for axis hysteresis and warm starting) are all the next step needs, so stepping on from
+        here gives the same bits as a run that went through it.
+        """
+        self._restore(record)
+        self._contacts = record.contacts
+        self._cache = ContactCache.of(record.contacts, self.model.n_bodies)
         self._last = self.record()
 
     @property
