@@ -1,0 +1,204 @@
+"""`Recorder`: feeds the engine's step records to the MCAP log and/or the Rerun recording.
+
+Usage (the run loop in isaac/commands.py)::
+
+    with Recorder(sim, mcap_path="out.mcap", rrd_path="out.rrd") as rec:
+        rec.write(sim.record())          # step 0: the initial state
+        for _ in range(steps):
+            rec.write(sim.step())
+    # or explicitly: rec.close(complete=False, stopped_at=k, reason="interrupted")
+
+Every record is checked for NaN / infinity before anything is written: a bad value raises
+`SimulationError` naming the step and the body, and the log keeps every step before it.
+Both files are written as ``NAME.partial`` and renamed on close (clean or interrupted).
+The recorder never re-derives physics: it writes the record's arrays and the diagnostics of them.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from isaac import diagnostics
+from isaac.errors import IsaacError, LogError, SimulationError
+from isaac.records import StepRecord
+
+_CONTACT_FLOATS = ("point", "normal", "depth", "push_a", "push_b", "impulse", "tangent_impulse",
+                   "restitution")
+_BODY_FLOATS = ("position", "angle", "velocity", "angular_velocity")
+
+
+def compute_stats(model, gravity, record: StepRecord) -> dict:
+    """The ``/stats`` values of one record (SI units; see isaac.diagnostics)."""
+    totals = diagnostics.summary(model, record, gravity)
+    ke, pe = totals.kinetic_energy, totals.potential_energy
+    p = totals.linear_momentum
+    c = record.contacts
+    n = len(c)
+    return {
+        "kinetic_energy": ke,
+        "potential_energy": pe,
+        "total_energy": ke + pe,
+        "linear_momentum_x": float(p[0]),
+        "linear_momentum_y": float(p[1]),
+        "angular_momentum": totals.angular_momentum,
+        "contact_count": n,
+        "max_depth": float(np.max(c.depth)) if n else 0.0,
+        "max_impulse": float(np.max(c.impulse)) if n else 0.0,
+        "state_hash": diagnostics.state_hash(record),
+    }
+
+
+def _first_bad_row(arr: np.ndarray) -> int | None:
+    """Index of the first row holding a NaN or infinity, or None when all are finite.
+
+    Fast path: a sum is finite only if every term is (NaN and inf propagate; inf - inf is NaN),
+    so one reduction per array decides; overflow to inf merely sends it to the exact check.
+    """
+    if arr.size == 0 or math.isfinite(float(np.add.reduce(arr, axis=None))):
+        return None
+    bad = ~np.isfinite(arr.reshape(arr.shape[0], -1)).all(axis=1)
+    rows = np.flatnonzero(bad)
+    return int(rows[0]) if rows.size else None
+
+
+def check_finite(names, record: StepRecord) -> None:
+    """Raise `SimulationError` (naming step and body) if the record holds a NaN or infinity."""
+    for field in _BODY_FLOATS:
+        k = _first_bad_row(getattr(record, field))
+        if k is not None:
+            name = str(names[k])
+            raise SimulationError(
+                f"step {record.step}: body {name!r} (index {k}) has a non-finite {field}; "
+                f"the log keeps steps up to {record.step - 1}", step=record.step, body=name)
+    c = record.contacts
+    for field in _CONTACT_FLOATS:
+        row = _first_bad_row(getattr(c, field))
+        if row is not None:
+            a, b = int(c.a[row]), int(c.b[row])
+            name = str(names[a])
+            raise SimulationError(
+                f"step {record.step}: contact between {name!r} and {str(names[b])!r} has a "
+                f"non-finite {field}; the log keeps steps up to {record.step - 1}",
+                step=record.step, body=name)
+
+
+class Recorder:
+    """Records a `Simulation` run to MCAP (``mcap_path``) and/or Rerun (``rrd_path``).
+
+    sim: the simulation (``.scene``, ``.model``); only read, never stepped here.
+    mcap_path, rrd_path: output files (None to skip); written as ``PATH.partial`` until closed.
+    scene_text: the expanded scene YAML to embed; default ``isaac.scene.scene_to_yaml(sim.scene)``.
+    compression: MCAP chunk compression, "none" (default: fastest), "lz4" or "zstd".
+    flush_every: MCAP chunks are closed and flushed every this many steps (<= 100).
+    foxglove: also write ``/foxglove/scene`` (foxglove.SceneUpdate: outlines, normals, impulses)
+        for Foxglove's 3D panel; off by default (it costs more than the physics channels).
+    impulse_scale: length (m) of an impulse arrow per N s in the Rerun view; default from the
+        scene's sizes and masses (written in the recording).
+    """
+
+    def __init__(self, sim, mcap_path: str | None = None, rrd_path: str | None = None, *,
+                 scene_text: str | None = None, compression: str = "none",
+                 flush_every: int = 100, foxglove: bool = False,
+                 impulse_scale: float | None = None) -> None:
+        self.sim = sim
+        self.model = sim.model
+        self.scene = sim.scene
+        self.gravity = tuple(float(g) for g in self.scene.world.gravity)
+        if scene_text is None:
+            try:
+                from isaac.scene import scene_to_yaml
+            except ImportError as exc:
+                raise LogError("isaac.scene.scene_to_yaml is not available") from exc
+            scene_text = scene_to_yaml(self.scene)
+        self.scene_text = scene_text
+        self.mcap = None
+        self.rerun = None
+        self.steps_written = 0
+        self.last_step: int | None = None
+        self.closed = False
+        self.paths: dict[str, str] = {}
+        try:
+            if mcap_path is not None:
+                from recorder.mcap_writer import McapLogWriter
+                scene_encoder = None
+                if foxglove:
+                    from recorder.foxglove import SceneEncoder
+                    from recorder.rerun_writer import default_scales
+                    auto_impulse, normal_length = default_scales(self.model)
+                    scene_encoder = SceneEncoder(
+                        self.model, normal_length=normal_length,
+                        impulse_scale=auto_impulse if impulse_scale is None else impulse_scale)
+                self.mcap = McapLogWriter(mcap_path, self.model, self.scene, scene_text,
+                                          flush_every=flush_every, compression=compression,
+                                          foxglove=scene_encoder)
+            if rrd_path is not None:
+                from recorder.rerun_writer import RerunLogWriter
+                self.rerun = RerunLogWriter(rrd_path, self.model, self.scene,
+                                            impulse_scale=impulse_scale)
+        except BaseException:
+            self._abandon()
+            raise
+
+    def write(self, record: StepRecord) -> None:
+        """Record one step (in order, starting with step 0). Raises SimulationError on NaN/inf."""
+        if self.closed:
+            raise LogError("the recorder is closed")
+        check_finite(self.model.names, record)
+        stats = compute_stats(self.model, self.gravity, record)
+        if self.mcap is not None:
+            self.mcap.write(record, stats)
+        if self.rerun is not None:
+            self.rerun.write(record, stats)
+        self.steps_written += 1
+        self.last_step = record.step
+
+    def close(self, complete: bool = True, stopped_at: int | None = None,
+              reason: str | None = None) -> dict[str, str]:
+        """Finish both files cleanly (keeping every step written) and rename them.
+
+        complete: False when the run was interrupted or failed; then ``stopped_at`` (default: the
+            last recorded step) and ``reason`` are written into the log.
+        Returns {"mcap": path, "rrd": path} for the files written.
+        """
+        if self.closed:
+            return self.paths
+        self.closed = True
+        if not complete and stopped_at is None:
+            stopped_at = self.last_step
+        errors = []
+        for key, writer in (("mcap", self.mcap), ("rrd", self.rerun)):
+            if writer is None:
+                continue
+            try:
+                self.paths[key] = writer.close(complete=complete, stopped_at=stopped_at,
+                                               reason=reason)
+            except Exception as exc:  # noqa: BLE001 - close the other file, then report
+                errors.append(f"{key}: {exc}")
+        if errors:
+            raise LogError("could not finish the log: " + "; ".join(errors))
+        return self.paths
+
+    def _abandon(self) -> None:
+        for writer in (self.mcap, self.rerun):
+            if writer is not None:
+                try:
+                    writer.abandon()
+                except Exception:  # noqa: BLE001 - best effort on a failed start
+                    pass
+        self.closed = True
+
+    def __enter__(self) -> "Recorder":
+        return self
+
+    def __exit__(self, exc_type, exc, tb) -> bool:
+        if exc_type is None:
+            self.close(complete=True)
+        elif issubclass(exc_type, KeyboardInterrupt):
+            self.close(complete=False, reason="interrupted")
+        elif issubclass(exc_type, IsaacError):
+            self.close(complete=False, stopped_at=getattr(exc, "step", None), reason=str(exc))
+        else:
+            self.close(complete=False, reason=f"{exc_type.__name__}: {exc}")
+        return False

@@ -1,0 +1,318 @@
+"""Write an ISAAC run as a Rerun recording (.rrd): for looking, not the source of truth.
+
+Layout (docs/log-format.md, "Rerun"):
+- timelines ``step`` (sequence) and ``sim_time`` (duration, s);
+- ``world``: static ``Transform3D(scale=[1, -1, 1])``: physics is y-up, Rerun's 2D views y-down;
+- ``world/bodies/concrete``: concrete bodies' outlines, logged once as static;
+- ``world/bodies/moving``: one closed strip per existing moving body per step (world frame, m),
+  with the body names as labels (logged at step 0 and whenever a body enters or leaves);
+- ``world/contacts``: contact points; ``world/normals``: unit normals (drawn ``normal_length`` m
+  long); ``world/push``: the non-zero push-out displacements of a and b, at the point (true
+  length, m);
+  ``world/impulses``: ``j * n`` at the point, ``impulse_scale`` m per N s (the scale is stored
+  in the recording as AnyValues on ``world/impulses`` and in the ``info`` text document);
+- ``stats/<name>``: the `/stats` scalars as time series.
+Steps are buffered and sent column-wise (``send_columns``) every ``batch`` steps.
+Positions are float32 in Rerun: exact values live in the MCAP log only.
+"""
+
+from __future__ import annotations
+
+import os
+
+import numpy as np
+import pyarrow as pa
+import rerun as rr
+
+from isaac.records import StepRecord
+
+APP_ID = "isaac"
+STAT_NAMES = ("kinetic_energy", "potential_energy", "total_energy", "linear_momentum_x",
+              "linear_momentum_y", "angular_momentum", "contact_count", "max_depth",
+              "max_impulse")
+
+_MOVING = [70, 140, 230]
+_CONCRETE = [150, 150, 150]
+_POINT = [230, 50, 50]
+_NORMAL = [240, 200, 40]
+_PUSH = [40, 210, 210]
+_IMPULSE = [220, 60, 220]
+
+
+def _closed_strip_index(counts: np.ndarray, v_max: int) -> np.ndarray:
+    """(n, v_max + 1) vertex indices of each closed outline.
+
+    A body with c < v_max vertices repeats vertex 0 after closing: the degenerate segments draw
+    nothing, and every strip has the same length, so all strips form one (n, v_max + 1, 2) array.
+    """
+    j = np.arange(v_max + 1)[None, :]
+    return np.where(j < counts[:, None], j, 0)
+
+
+def default_scales(model) -> tuple[float, float]:
+    """(impulse_scale m per N s, normal_length m) for drawing arrows.
+
+    L = median body size (circumradius about the centre of mass), m = median moving mass: an
+    impulse arrow L long changes a median body's speed by 1 m/s; normals are drawn L / 2 long.
+    """
+    local = np.asarray(model.vertices_local, dtype=np.float64)
+    if local.size == 0:
+        return 1.0, 0.5
+    size = np.sqrt(np.max(np.sum(local * local, axis=2), axis=1))
+    char_len = float(np.median(size))
+    mass = np.asarray(model.mass, dtype=np.float64)
+    concrete = np.asarray(model.concrete, dtype=bool)
+    moving = mass[~concrete] if np.any(~concrete) else mass
+    m_med = float(np.median(moving))
+    return char_len / max(m_med * 1.0, 1e-12), 0.5 * char_len
+
+
+_EMPTY2 = np.zeros((0, 2), dtype=np.float32)
+_STRIP_TYPE = rr.components.LineStrip2DBatch._ARROW_DATATYPE
+
+
+def _strips_arrow(strips: np.ndarray) -> pa.Array:
+    """(k, L, 2) equal-length strips as Rerun's LineStrip2D arrow array, built in one go.
+
+    Rerun's own conversion walks the strips in Python (one call per strip); this builds the
+    same array (list of fixed-size [x, y] float32 lists) from offsets and one flat buffer.
+    """
+    k, length = strips.shape[0], strips.shape[1]
+    flat = pa.array(np.ascontiguousarray(strips, dtype=np.float32).reshape(-1))
+    inner = pa.FixedSizeListArray.from_arrays(flat, type=_STRIP_TYPE.value_type)
+    offsets = pa.array(np.arange(k + 1, dtype=np.int32) * length)
+    return pa.ListArray.from_arrays(offsets, inner, type=_STRIP_TYPE)
+
+
+class RerunLogWriter:
+    """Writes one run to ``path`` (through ``path + '.partial'``).
+
+    model: names, vertices_local (n, V, 2), vertex_count, mass, concrete (Simulation.model or a
+        recorder.reader.WorldTable).
+    scene: anything with ``.name`` and ``.world.dt`` (s).
+    impulse_scale: m of arrow per N s; default: a median body size per (median mass * 1 m/s).
+    normal_length: drawn length (m) of unit normals; default half a median body size.
+    batch: steps buffered per ``send_columns``.
+    """
+
+    def __init__(self, path: str, model, scene, *, impulse_scale: float | None = None,
+                 normal_length: float | None = None, batch: int = 100) -> None:
+        self.path = str(path)
+        self.partial_path = self.path + ".partial"
+        self.model = model
+        self.names = [str(x) for x in model.names]
+        self.batch = batch
+        counts = np.asarray(model.vertex_count, dtype=np.int64)
+        local = np.asarray(model.vertices_local, dtype=np.float64)
+        v_max = local.shape[1] if local.ndim == 3 else 0
+        idx = _closed_strip_index(counts, v_max)
+        n = len(self.names)
+        # (n, v_max + 1, 2) closed outlines in the body frame
+        self.outline_local = local[np.arange(n)[:, None], idx] if n else np.zeros((0, 1, 2))
+        self._local_complex = self.outline_local[:, :, 0] + 1j * self.outline_local[:, :, 1]
+        self.concrete = np.asarray(model.concrete, dtype=bool)
+        self._mask_key: bytes | None = None
+        auto_impulse, auto_normal = default_scales(model)
+        self.impulse_scale = float(impulse_scale) if impulse_scale is not None else auto_impulse
+        self.normal_length = float(normal_length) if normal_length is not None else auto_normal
+        self._closed = False
+        self._static_done = False
+        self._last_labels_key: bytes | None = None
+        self._reset()
+
+        self.rec = rr.RecordingStream(APP_ID, recording_id=f"isaac-{scene.name}")
+        self.rec.save(self.partial_path)
+        rec = self.rec
+        rec.log("world", rr.Transform3D(scale=[1.0, -1.0, 1.0]), static=True)
+        rec.log("world/bodies/moving", rr.LineStrips2D.from_fields(colors=[_MOVING],
+                                                                   radii=[-1.5]), static=True)
+        rec.log("world/contacts", rr.Points2D.from_fields(colors=[_POINT], radii=[-3.0]),
+                static=True)
+        rec.log("world/normals", rr.Arrows2D.from_fields(colors=[_NORMAL]), static=True)
+        rec.log("world/push", rr.Arrows2D.from_fields(colors=[_PUSH]), static=True)
+        rec.log("world/impulses", rr.Arrows2D.from_fields(colors=[_IMPULSE]), static=True)
+        rec.log("world/impulses", rr.AnyValues(impulse_scale_m_per_Ns=self.impulse_scale,
+                                               normal_length_m=self.normal_length), static=True)
+        rec.log("info", rr.TextDocument(
+            f"# ISAAC run: {scene.name}\n\n"
+            f"- physics frame: x right, y up (flipped once on `world`); units m, s, kg\n"
+            f"- impulse arrows (`world/impulses`): {self.impulse_scale:.6g} m per N s\n"
+            f"- normal arrows (`world/normals`): {self.normal_length:.6g} m long (unit normals,"
+            f" from body a to body b)\n"
+            f"- push arrows (`world/push`): true length (m), for body a and body b\n"
+            f"- exact float64 data: the MCAP log\n", media_type=rr.MediaType.MARKDOWN),
+            static=True)
+
+    def _reset(self) -> None:
+        self._steps: list[int] = []
+        self._times: list[float] = []
+        self._strips: list[np.ndarray] = []
+        self._strip_counts: list[int] = []
+        self._points: list[np.ndarray] = []
+        self._normals: list[np.ndarray] = []
+        self._impulses: list[np.ndarray] = []
+        self._contact_counts: list[int] = []
+        self._pushes: list[tuple[np.ndarray, np.ndarray]] = []
+        self._stats: dict[str, list[float]] = {k: [] for k in STAT_NAMES}
+
+    def _outlines(self, record: StepRecord, mask: np.ndarray) -> np.ndarray:
+        """(k, v_max + 1, 2) float32 world outlines of the bodies in ``mask``:
+        position + R(angle) @ local (counter-clockwise), as complex numbers
+        ``z = p + e^{i angle} z_local`` (one multiply-add per vertex)."""
+        key = mask.tobytes()
+        if key != self._mask_key:
+            # the body set changes rarely: index the outlines once per change
+            self._mask_key = key
+            self._index = np.flatnonzero(mask)
+            self._local_c = np.ascontiguousarray(self._local_complex[self._index])
+        idx = self._index
+        angle = record.angle[idx]
+        rot = np.empty(idx.size, dtype=np.complex128)
+        rot.real = np.cos(angle)
+        rot.imag = np.sin(angle)
+        pos = np.empty(idx.size, dtype=np.complex128)
+        pos.real = record.position[idx, 0]
+        pos.imag = record.position[idx, 1]
+        z = self._local_c * rot[:, None]
+        z += pos[:, None]
+        return z.view(np.float64).reshape(idx.size, -1, 2).astype(np.float32)
+
+    def write(self, record: StepRecord, stats: dict | None = None) -> None:
+        """Buffer one step; sent column-wise every ``batch`` steps."""
+        rec = self.rec
+        exists = np.asarray(record.exists, dtype=bool)
+        if not self._static_done:
+            concrete = self.concrete & exists
+            if np.any(concrete):
+                rec.log("world/bodies/concrete", rr.LineStrips2D(
+                    self._outlines(record, concrete), colors=[_CONCRETE], radii=[-1.5],
+                    labels=[self.names[k] for k in np.flatnonzero(concrete)]), static=True)
+            self._static_done = True
+        moving = exists & ~self.concrete
+        key = moving.tobytes()
+        if key != self._last_labels_key:
+            # labels change only when a body enters or leaves: logged then, not every step
+            rec.set_time("step", sequence=record.step)
+            rec.set_time("sim_time", duration=record.time)
+            rec.log("world/bodies/moving", rr.LineStrips2D.from_fields(
+                labels=[self.names[k] for k in np.flatnonzero(moving)]))
+            self._last_labels_key = key
+        self._steps.append(record.step)
+        self._times.append(record.time)
+        strips = self._outlines(record, moving)
+        self._strips.append(strips)
+        self._strip_counts.append(strips.shape[0])
+        c = record.contacts
+        m = len(c)
+        self._contact_counts.append(m)
+        if m:
+            # float32 (what Rerun stores) right away: half the bytes to buffer and concatenate
+            point = c.point.astype(np.float32)
+            self._points.append(point)
+            self._normals.append((c.normal * self.normal_length).astype(np.float32))
+            self._impulses.append(
+                (c.normal * (c.impulse * self.impulse_scale)[:, None]).astype(np.float32))
+            # push arrows only where a push was applied (slot 0 rows of pushed pairs)
+            moved_a = np.flatnonzero(np.any(c.push_a != 0.0, axis=1))
+            moved_b = np.flatnonzero(np.any(c.push_b != 0.0, axis=1))
+            self._pushes.append((np.concatenate([point[moved_a], point[moved_b]]),
+                                 np.concatenate([c.push_a[moved_a], c.push_b[moved_b]])
+                                 .astype(np.float32)))
+        else:
+            self._pushes.append((_EMPTY2, _EMPTY2))
+        if stats is not None:
+            for k in STAT_NAMES:
+                self._stats[k].append(float(stats[k]))
+        if len(self._steps) >= self.batch:
+            self._send()
+
+    def _send(self) -> None:
+        if not self._steps:
+            return
+        rec = self.rec
+        times = [rr.TimeColumn("step", sequence=self._steps),
+                 rr.TimeColumn("sim_time", duration=self._times)]
+        v_len = self.outline_local.shape[1]
+        strips = (np.concatenate(self._strips) if self._strips
+                  else np.zeros((0, v_len, 2)))
+        rec.send_columns("world/bodies/moving", indexes=times,
+                         columns=rr.LineStrips2D.columns(strips=_strips_arrow(strips)).partition(
+                             self._strip_counts))
+        counts = self._contact_counts
+        if any(counts):
+            points = np.concatenate(self._points)
+            normals = np.concatenate(self._normals)
+            impulses = np.concatenate(self._impulses)
+        else:
+            points = normals = impulses = _EMPTY2
+        push_pt = np.concatenate([p for p, _ in self._pushes])
+        push_v = np.concatenate([v for _, v in self._pushes])
+        push_counts = [p.shape[0] for p, _ in self._pushes]
+        rec.send_columns("world/contacts", indexes=times,
+                         columns=rr.Points2D.columns(positions=points).partition(counts))
+        rec.send_columns("world/normals", indexes=times,
+                         columns=rr.Arrows2D.columns(origins=points, vectors=normals)
+                         .partition(counts))
+        rec.send_columns("world/impulses", indexes=times,
+                         columns=rr.Arrows2D.columns(origins=points, vectors=impulses)
+                         .partition(counts))
+        rec.send_columns("world/push", indexes=times,
+                         columns=rr.Arrows2D.columns(origins=push_pt, vectors=push_v)
+                         .partition(push_counts))
+        if self._stats[STAT_NAMES[0]]:
+            for k in STAT_NAMES:
+                rec.send_columns(f"stats/{k}", indexes=times,
+                                 columns=rr.Scalars.columns(scalars=np.asarray(self._stats[k])))
+        self._reset()
+
+    def close(self, *, complete: bool = True, stopped_at: int | None = None,
+              reason: str | None = None) -> str:
+        """Send what is buffered, note an early stop in the recording, finish and rename."""
+        if self._closed:
+            return self.path
+        self._closed = True
+        last = self._steps[-1] if self._steps else None
+        self._send()
+        if not complete:
+            at = stopped_at if stopped_at is not None else last
+            if at is not None:
+                self.rec.set_time("step", sequence=int(at))
+            self.rec.log("log", rr.TextLog(
+                f"run stopped at step {at}" + (f": {reason}" if reason else ""),
+                level=rr.TextLogLevel.WARN))
+        self.rec.flush()
+        self.rec.disconnect()
+        os.replace(self.partial_path, self.path)
+        return self.path
+
+    def abandon(self) -> None:
+        if not self._closed:
+            self._closed = True
+            try:
+                self._send()
+                self.rec.flush()
+                self.rec.disconnect()
+            except Exception:  # noqa: BLE001 - best effort
+                pass
+
+
+def mcap_to_rrd(mcap_path: str, rrd_path: str, **kwargs) -> str:
+    """Convert an ISAAC MCAP log (clean or partial) to a Rerun recording; returns ``rrd_path``."""
+    from types import SimpleNamespace
+
+    from recorder.reader import LogReader
+
+    log = LogReader(mcap_path)
+    scene = SimpleNamespace(name=log.metadata.get("scene_name", "log"),
+                            world=SimpleNamespace(dt=log.dt))
+    writer = RerunLogWriter(rrd_path, log.world, scene, **kwargs)
+    try:
+        for logged in log.steps():
+            writer.write(logged.record, logged.stats)
+    except BaseException:
+        writer.abandon()
+        raise
+    end = log.end or {}
+    complete = log.closed_cleanly and end.get("complete") == "true"
+    return writer.close(complete=complete, reason=None if complete else end.get("reason")
+                        or "the log was not closed")

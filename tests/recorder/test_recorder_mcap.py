@@ -1,0 +1,378 @@
+"""The MCAP log: read back with generic readers, deterministic, crash-safe, NaN-safe.
+
+These tests use synthetic step records (tests/recorder/recorder_synth.py) so they check the log
+format itself; tests/recorder/test_recorder_physics.py checks logs of real runs.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+from google.protobuf import descriptor_pb2, descriptor_pool, message_factory
+from mcap.reader import make_reader
+
+from isaac.errors import LogError, SimulationError
+from isaac.records import StepRecord
+from recorder import Recorder
+from recorder.reader import LogReader
+
+sys.path.insert(0, str(Path(__file__).parent))
+from recorder_synth import SCENE_TEXT, SynthSim  # noqa: E402
+
+REPO = Path(__file__).resolve().parents[2]
+PYTHON = sys.executable
+
+
+def record_run(path, *, n=20, contacts=8, steps=250, rrd=None, leave_at=None, **kwargs):
+    sim = SynthSim(n, contacts, leave_at=leave_at)
+    records = [sim.record()] + [sim.step() for _ in range(steps)]
+    with Recorder(sim, mcap_path=str(path), rrd_path=None if rrd is None else str(rrd),
+                  scene_text=SCENE_TEXT, **kwargs) as rec:
+        for r in records:
+            rec.write(r)
+    return sim, records
+
+
+def generic_messages(path):
+    """Decode every message with google.protobuf from the FileDescriptorSet stored in the file."""
+    out = []
+    classes = {}
+    with open(path, "rb") as f:
+        reader = make_reader(f)
+        for schema, channel, message in reader.iter_messages():
+            if schema.id not in classes:
+                fds = descriptor_pb2.FileDescriptorSet.FromString(schema.data)
+                pool = descriptor_pool.DescriptorPool()
+                for fd in fds.file:
+                    pool.Add(fd)
+                classes[schema.id] = message_factory.GetMessageClass(
+                    pool.FindMessageTypeByName(schema.name))
+            assert schema.encoding == "protobuf" and channel.message_encoding == "protobuf"
+            out.append((channel.topic, message, classes[schema.id].FromString(message.data)))
+    return out
+
+
+def test_generic_protobuf_reader_gets_every_float_bit_exact(tmp_path):
+    path = tmp_path / "run.mcap"
+    sim, records = record_run(path, leave_at=100)
+    msgs = generic_messages(path)
+    bodies = [m for t, _, m in msgs if t == "/bodies"]
+    contacts = [m for t, _, m in msgs if t == "/contacts"]
+    stats = [m for t, _, m in msgs if t == "/stats"]
+    worlds = [(raw, m) for t, raw, m in msgs if t == "/world"]
+    assert len(bodies) == len(contacts) == len(stats) == len(records)
+    for r, b, c, s in zip(records, bodies, contacts, stats):
+        assert b.step == c.step == s.step == r.step
+        assert b.time == r.time
+        np.testing.assert_array_equal(np.array(b.position).reshape(-1, 2), r.position)
+        np.testing.assert_array_equal(np.array(b.angle), r.angle)
+        np.testing.assert_array_equal(np.array(b.velocity).reshape(-1, 2), r.velocity)
+        np.testing.assert_array_equal(np.array(b.angular_velocity), r.angular_velocity)
+        np.testing.assert_array_equal(np.array(b.exists, dtype=bool), r.exists)
+        rc = r.contacts
+        for name in ("substep", "a", "b", "feature", "slot", "depth", "impulse",
+                     "tangent_impulse", "restitution"):
+            np.testing.assert_array_equal(np.array(getattr(c, name)), getattr(rc, name))
+        for name in ("point", "normal", "push_a", "push_b"):
+            got = np.array(getattr(c, name)).reshape(-1, 2)
+            np.testing.assert_array_equal(got, getattr(rc, name))
+        assert s.contact_count == len(rc)
+        assert len(s.state_hash) == 64
+    # /world at step 0 and when the last body leaves at step 100, with everything per body
+    assert [m.step for _, m in worlds] == [0, 100]
+    first = worlds[0][1]
+    model = sim.model
+    assert [b.name for b in first.bodies] == model.names
+    for k, b in enumerate(first.bodies):
+        assert b.index == k
+        c = int(model.vertex_count[k])
+        np.testing.assert_array_equal(np.array(b.vertices_local).reshape(-1, 2),
+                                      model.vertices_local[k, :c])
+        assert (b.mass, b.inertia, b.restitution) == (model.mass[k], model.inertia[k],
+                                                      model.restitution[k])
+        assert b.concrete == bool(model.concrete[k]) and b.exists
+    assert not worlds[1][1].bodies[-1].exists
+
+
+def test_log_time_is_step_times_dt_in_integer_nanoseconds(tmp_path):
+    path = tmp_path / "run.mcap"
+    record_run(path, steps=30)
+    for topic, raw, decoded in generic_messages(path):
+        assert raw.sequence == decoded.step
+        assert raw.log_time == raw.publish_time == round(decoded.step * (1 / 60) * 1e9)
+
+
+def test_metadata_and_scene_attachment_come_before_any_chunk(tmp_path):
+    path = tmp_path / "run.mcap"
+    record_run(path, steps=5)
+    with open(path, "rb") as f:
+        reader = make_reader(f)
+        meta = {m.name: m.metadata for m in reader.iter_metadata()}
+        attachments = {a.name: a for a in reader.iter_attachments()}
+        summary = reader.get_summary()
+    isaac = meta["isaac"]
+    for key in ("engine_version", "python_version", "numpy_version", "numba_version",
+                "platform", "cpu", "scene_sha256", "settings", "world.dt", "world.gravity",
+                "world.fidelity", "world.solver"):
+        assert key in isaac, key
+    assert attachments["scene.yaml"].data.decode() == SCENE_TEXT
+    import hashlib
+    assert isaac["scene_sha256"] == hashlib.sha256(SCENE_TEXT.encode()).hexdigest()
+    first_chunk = min(c.chunk_start_offset for c in summary.chunk_indexes)
+    assert all(i.offset < first_chunk for i in summary.metadata_indexes if i.name == "isaac")
+    assert all(i.offset < first_chunk for i in summary.attachment_indexes)
+    assert meta["isaac.end"]["complete"] == "true"
+
+
+def test_two_runs_give_byte_identical_files(tmp_path):
+    record_run(tmp_path / "one.mcap", steps=120)
+    record_run(tmp_path / "two.mcap", steps=120)
+    assert (tmp_path / "one.mcap").read_bytes() == (tmp_path / "two.mcap").read_bytes()
+    one = [raw.data for _, raw, _ in generic_messages(tmp_path / "one.mcap")]
+    two = [raw.data for _, raw, _ in generic_messages(tmp_path / "two.mcap")]
+    assert one == two
+
+
+def test_reader_returns_the_records_that_were_written(tmp_path):
+    path = tmp_path / "run.mcap"
+    sim, records = record_run(path, leave_at=50)
+    log = LogReader(str(path))
+    assert log.closed_cleanly and log.complete
+    assert log.scene_text == SCENE_TEXT
+    assert log.world.names == sim.model.names
+    got = list(log.steps())
+    assert [s.step for s in got] == [r.step for r in records]
+    for s, r in zip(got, records):
+        for name in ("position", "angle", "velocity", "angular_velocity", "exists"):
+            np.testing.assert_array_equal(getattr(s.record, name), getattr(r, name))
+        np.testing.assert_array_equal(s.record.contacts.feature, r.contacts.feature)
+        np.testing.assert_array_equal(s.record.contacts.push_b, r.contacts.push_b)
+        assert s.world.exists[-1] == (r.step < 50)
+    assert log.step(7).record.step == 7
+    with pytest.raises(LogError):
+        log.step(10_000)
+
+
+def test_no_file_without_partial_suffix_until_closed(tmp_path):
+    sim = SynthSim(5, 2)
+    rec = Recorder(sim, mcap_path=str(tmp_path / "r.mcap"), scene_text=SCENE_TEXT)
+    rec.write(sim.record())
+    assert (tmp_path / "r.mcap.partial").exists() and not (tmp_path / "r.mcap").exists()
+    rec.close(complete=False, stopped_at=1, reason="interrupted")
+    assert (tmp_path / "r.mcap").exists() and not (tmp_path / "r.mcap.partial").exists()
+    log = LogReader(str(tmp_path / "r.mcap"))
+    assert log.closed_cleanly and not log.complete
+    assert log.end["stopped_at"] == "1" and log.end["reason"] == "interrupted"
+
+
+def test_nan_stops_the_run_naming_step_and_body_and_keeps_earlier_steps(tmp_path):
+    sim = SynthSim(6, 3)
+    path = tmp_path / "nan.mcap"
+    written = []
+    with pytest.raises(SimulationError) as info:
+        with Recorder(sim, mcap_path=str(path), scene_text=SCENE_TEXT) as rec:
+            rec.write(sim.record())
+            for _ in range(10):
+                r = sim.step()
+                if r.step == 6:
+                    pos = r.position.copy()
+                    pos[3, 1] = np.nan
+                    r = StepRecord(r.step, r.time, pos, r.angle, r.velocity,
+                                   r.angular_velocity, r.exists, r.contacts)
+                rec.write(r)
+                written.append(r.step)
+    assert info.value.step == 6 and info.value.body == "body3"
+    assert "step 6" in str(info.value) and "body3" in str(info.value)
+    log = LogReader(str(path))
+    assert [s.step for s in log.steps()] == [0, 1, 2, 3, 4, 5]
+    assert log.end["complete"] == "false" and log.end["stopped_at"] == "6"
+    for s in log.steps():
+        assert np.isfinite(s.record.position).all()
+
+
+def _flushed_steps(clean_path, cut):
+    """Steps whose chunks lie wholly before byte ``cut`` (what must survive a cut there)."""
+    with open(clean_path, "rb") as f:
+        reader = make_reader(f)
+        summary = reader.get_summary()
+        steps = set()
+        for ci in summary.chunk_indexes:
+            if ci.chunk_start_offset + ci.chunk_length <= cut:
+                for _, _, m in reader.iter_messages(starting_at=ci.message_start_time,
+                                                    ending_at=ci.message_end_time):
+                    steps.add(m.sequence)
+    return steps
+
+
+def test_file_cut_at_60_percent_is_inspected_and_recovered_without_losing_flushed_steps(
+        tmp_path):
+    clean = tmp_path / "clean.mcap"
+    _, records = record_run(clean, n=30, contacts=12, steps=450)
+    data = clean.read_bytes()
+    cut = int(len(data) * 0.6)
+    partial = tmp_path / "cut.mcap.partial"
+    partial.write_bytes(data[:cut])
+    expected = sorted(_flushed_steps(clean, cut))
+    assert len(expected) >= 100  # at least one full flush interval lies before the cut
+    log = LogReader(str(partial))
+    assert not log.closed_cleanly and log.end is None
+    got = [s.step for s in log.steps()]
+    assert got[:len(expected)] == expected
+    assert got == list(range(len(got)))
+
+    out = run_cli("inspect", str(partial))
+    assert out.returncode == 0, out.stderr
+    assert "NOT closed" in out.stdout
+
+    fixed = tmp_path / "fixed.mcap"
+    out = run_cli("recover", str(partial), str(fixed))
+    assert out.returncode == 0, out.stderr
+    with open(fixed, "rb") as f:
+        summary = make_reader(f).get_summary()  # indexed, readable by the seeking reader
+    assert summary is not None and summary.chunk_indexes
+    rlog = LogReader(str(fixed))
+    assert rlog.closed_cleanly and not rlog.complete
+    steps = list(rlog.steps())
+    assert [s.step for s in steps] == got
+    for s in steps:
+        np.testing.assert_array_equal(s.record.position, records[s.step].position)
+
+
+_KILLED_WRITER = r"""
+import sys, time
+sys.path.insert(0, {synth_dir!r})
+from recorder_synth import SynthSim, SCENE_TEXT
+from recorder import Recorder
+sim = SynthSim(40, 10)
+rec = Recorder(sim, mcap_path={path!r}, scene_text=SCENE_TEXT)
+rec.write(sim.record())
+while True:
+    r = sim.step()
+    rec.write(r)
+    print(r.step, flush=True)
+    time.sleep(0.002)
+"""
+
+
+def test_sigkilled_writer_leaves_a_partial_file_with_every_flushed_step(tmp_path):
+    path = tmp_path / "killed.mcap"
+    script = _KILLED_WRITER.format(synth_dir=str(Path(__file__).parent), path=str(path))
+    proc = subprocess.Popen([PYTHON, "-c", script], stdout=subprocess.PIPE, text=True,
+                            cwd=REPO)
+    last = 0
+    try:
+        for line in proc.stdout:
+            last = int(line)
+            if last >= 350:
+                break
+        # the writer thread has flushed step 299 once the file holds the chunk; wait for it
+        deadline = time.time() + 20
+        partial = Path(str(path) + ".partial")
+        while time.time() < deadline:
+            try:
+                if len([s for s in LogReader(str(partial)).steps()]) >= 300:
+                    break
+            except LogError:
+                pass
+            time.sleep(0.05)
+    finally:
+        os.kill(proc.pid, signal.SIGKILL)
+        proc.wait()
+    partial = Path(str(path) + ".partial")
+    log = LogReader(str(partial))
+    assert not log.closed_cleanly
+    steps = [s.step for s in log.steps()]
+    # every step up to the last flush (flushes after steps 0, 99, 199, 299, ...), none missing
+    assert steps == list(range(len(steps)))
+    assert len(steps) >= 300
+    assert run_cli("inspect", str(partial)).returncode == 0
+    out = run_cli("recover", str(partial), str(path))
+    assert out.returncode == 0, out.stderr
+    assert [s.step for s in LogReader(str(path)).steps()] == steps
+
+
+def run_cli(*args):
+    return subprocess.run([PYTHON, "-m", "isaac", *args], capture_output=True, text=True,
+                          cwd=REPO, timeout=300)
+
+
+@pytest.mark.parametrize("content", [b"", os.urandom(4096), b"\x89MCAP0\r\n" + b"\0" * 100])
+def test_inspect_rejects_bad_files_in_one_line(tmp_path, content):
+    path = tmp_path / "bad.mcap"
+    path.write_bytes(content)
+    out = run_cli("inspect", str(path))
+    assert out.returncode == 2
+    assert out.stderr.count("\n") == 1 and "Traceback" not in out.stderr
+    assert out.stderr.startswith("isaac inspect: error:")
+
+
+def test_inspect_rejects_an_mcap_that_is_not_an_isaac_log(tmp_path):
+    from mcap.writer import Writer
+    path = tmp_path / "other.mcap"
+    with open(path, "wb") as f:
+        w = Writer(f)
+        w.start()
+        sid = w.register_schema("x", "jsonschema", b"{}")
+        cid = w.register_channel("/x", "json", sid)
+        w.add_message(cid, 0, b"{}", 0)
+        w.finish()
+    out = run_cli("inspect", str(path))
+    assert out.returncode == 2 and "not an ISAAC log" in out.stderr
+    assert out.stderr.count("\n") == 1
+    out = run_cli("inspect", str(tmp_path / "missing.mcap"))
+    assert out.returncode == 2 and out.stderr.count("\n") == 1
+
+
+def test_inspect_prints_summary_and_step_table(tmp_path):
+    path = tmp_path / "run.mcap"
+    _, records = record_run(path, steps=40)
+    out = run_cli("inspect", str(path))
+    assert out.returncode == 0, out.stderr
+    text = out.stdout
+    assert "synthetic" in text and "numpy" in text and "closed cleanly" in text
+    assert "steps    41" in text
+    total = sum(len(r.contacts) for r in records)
+    assert f"contacts {total} in all" in text
+    out = run_cli("inspect", str(path), "--step", "3")
+    assert out.returncode == 0, out.stderr
+    lines = out.stdout.splitlines()
+    assert lines[0].startswith("step 3") and f"{len(records[3].contacts)} contact" in lines[0]
+    header = [ln for ln in lines if ln.split() and ln.split()[0] == "row"]
+    assert header and "impulse" in header[0]
+    out = run_cli("inspect", str(path), "--step", "999")
+    assert out.returncode == 2 and "step 999" in out.stderr
+
+
+def test_foreground_and_background_writers_write_the_same_bytes(tmp_path):
+    from recorder.mcap_writer import McapLogWriter
+    from recorder.recording import compute_stats
+    sim = SynthSim(10, 4)
+    records = [sim.record()] + [sim.step() for _ in range(150)]
+    for bg, name in ((False, "fg.mcap"), (True, "bg.mcap")):
+        w = McapLogWriter(str(tmp_path / name), sim.model, sim.scene, SCENE_TEXT, background=bg)
+        for r in records:
+            w.write(r, compute_stats(sim.model, (0.0, -9.81), r))
+        w.close()
+    assert (tmp_path / "fg.mcap").read_bytes() == (tmp_path / "bg.mcap").read_bytes()
+
+
+@pytest.mark.parametrize("compression", ["lz4", "zstd"])
+def test_compressed_logs_read_back_and_recover(tmp_path, compression):
+    path = tmp_path / "c.mcap"
+    _, records = record_run(path, steps=230, compression=compression)
+    assert [s.step for s in LogReader(str(path)).steps()] == [r.step for r in records]
+    data = path.read_bytes()
+    cut = tmp_path / "c.mcap.partial"
+    cut.write_bytes(data[: int(len(data) * 0.6)])
+    expected = sorted(_flushed_steps(path, int(len(data) * 0.6)))
+    out = run_cli("recover", str(cut), str(tmp_path / "fixed.mcap"))
+    assert out.returncode == 0, out.stderr
+    got = [s.step for s in LogReader(str(tmp_path / "fixed.mcap")).steps()]
+    assert got[: len(expected)] == expected and got == list(range(len(got)))
