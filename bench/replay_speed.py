@@ -1,0 +1,90 @@
+"""Replay speed against the original run: `isaac run SCENE --mcap` vs `isaac replay` of its log.
+
+    .venv/bin/python bench/replay_speed.py [--scene scenes/pile.yaml] [--reps 3] [--out DIR]
+
+Each repetition runs the two commands one after the other (interleaved, so machine load hits both
+alike) as whole processes and reads two figures from each:
+- the loop rate (steps/s) each command reports, measured after its first step (which also loads
+  the compiled kernels): `isaac run` prints it, `isaac replay --json` writes ``steps_per_s``;
+- the wall time of the whole process (start-up, kernel loading, closing the file included).
+Prints one line per repetition, then the medians and the ratios replay/original as JSON (from the
+medians, and from the best repetition of each side). The target
+(issue "replay") is a replay no more than 20% slower than the original run: time ratio <= 1.2.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import re
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+# run from the checkout this script sits in (a copy of the repo works too: `python -m isaac`
+# imports the package from the working directory)
+REPO = Path(__file__).resolve().parents[1]
+RATE_RE = re.compile(r"([0-9.]+) steps/s")
+
+
+def _isaac(*args: str) -> tuple[float, str]:
+    t0 = time.perf_counter()
+    proc = subprocess.run([sys.executable, "-m", "isaac", *args], capture_output=True,
+                          text=True, cwd=REPO)
+    wall = time.perf_counter() - t0
+    if proc.returncode != 0:
+        raise SystemExit(f"isaac {' '.join(args)} failed ({proc.returncode}): "
+                         f"{proc.stderr.strip() or proc.stdout.strip()}")
+    return wall, proc.stdout
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="bench/replay_speed.py")
+    parser.add_argument("--scene", default=str(REPO / "scenes" / "pile.yaml"))
+    parser.add_argument("--reps", type=int, default=3)
+    parser.add_argument("--out", default=None, help="directory for the logs (default: a temp dir)")
+    args = parser.parse_args(argv)
+    out_dir = Path(args.out or tempfile.mkdtemp(prefix="isaac-replay-speed-"))
+    out_dir.mkdir(parents=True, exist_ok=True)
+    log = out_dir / (Path(args.scene).stem + ".mcap")
+    report = out_dir / "replay.json"
+    # warm-up: compile (or load) the kernels once so neither side of repetition 0 pays for it
+    _isaac("run", args.scene, "--steps", "2", "--mcap", str(log), "--quiet")
+    _isaac("replay", str(log))
+    rows = []
+    for rep in range(args.reps):
+        run_wall, run_out = _isaac("run", args.scene, "--mcap", str(log), "--quiet")
+        run_rate = float(RATE_RE.search(run_out).group(1))
+        replay_wall, replay_out = _isaac("replay", str(log), "--json", str(report))
+        result = json.loads(report.read_text())
+        if not result["identical"]:
+            raise SystemExit(f"the replay diverged: {replay_out.strip()}")
+        row = dict(rep=rep, steps=result["steps_compared"], run_steps_per_s=run_rate,
+                   replay_steps_per_s=result["steps_per_s"], run_wall_s=run_wall,
+                   replay_wall_s=replay_wall)
+        print(json.dumps(row), flush=True)
+        rows.append(row)
+    med = {k: statistics.median(r[k] for r in rows)
+           for k in ("run_steps_per_s", "replay_steps_per_s", "run_wall_s", "replay_wall_s")}
+    summary = dict(
+        scene=args.scene, steps=rows[0]["steps"], reps=args.reps, log_bytes=os.path.getsize(log),
+        **{f"median_{k}": v for k, v in med.items()},
+        # time per step of the replay over time per step of the original run (<= 1.2 required)
+        loop_time_ratio=med["run_steps_per_s"] / med["replay_steps_per_s"],
+        wall_time_ratio=med["replay_wall_s"] / med["run_wall_s"],
+        # the same from the best repetition of each (least disturbed by other load)
+        best_loop_time_ratio=max(r["run_steps_per_s"] for r in rows)
+        / max(r["replay_steps_per_s"] for r in rows),
+        best_wall_time_ratio=min(r["replay_wall_s"] for r in rows)
+        / min(r["run_wall_s"] for r in rows),
+    )
+    print(json.dumps(summary, indent=2))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,599 @@
+"""Replay a log against a re-simulation (`replay_log`) or compare two logs (`diff_logs`).
+
+How a replay works (docs/replay.md):
+1. the scene is the one embedded in the log (never a file on disk), checked against the sha256
+   recorded beside it; the versions and machine recorded in the log are compared with this one;
+2. the simulation starts from the scene's initial state (step 0), or from the state logged at
+   ``from_step`` (every logged step is a keyframe: state + the contacts that warm-start the next
+   step);
+3. for every logged step the re-simulated record is encoded with the recorder's own encoders and
+   the bytes are compared with the logged payloads (``/world`` when the set of bodies changed,
+   ``/bodies``, ``/contacts``, ``/stats``). Equal bytes are the common case and cost one memcmp;
+   only when they differ are both sides decoded to find the field, the body or contact row, the
+   two values and their distance in ULPs;
+4. the first divergence ends a bitwise replay. With ``all_steps`` or a ``tolerance`` the replay
+   goes on, restarting from the logged state of the step that differed, so each later step is
+   checked against its own logged predecessor and one difference is not counted a thousand times.
+
+`diff_logs` walks two logs step by step and compares their payloads the same way.
+A divergence is a result (`replay.report.Report`), never an exception; a bad file raises
+LogError / SceneError (exit status 2).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import struct
+import time
+from dataclasses import asdict
+from typing import Callable, Iterator
+
+import numpy as np
+
+from isaac.errors import LogError, SimulationError
+from isaac.records import StepRecord
+from isaac.scene import Scene, load_scene_text
+from recorder import schema as S
+from recorder.mcap_writer import (build_metadata, encode_bodies, encode_contacts, encode_stats,
+                                  encode_world)
+from recorder.reader import record_from_messages
+from recorder.recording import compute_stats
+from replay.reader import RawLog, RawStep
+from replay.report import DEFAULT_MAX_REPORTED, Divergence, Report
+
+# metadata keys whose difference voids the promise of bit-identical results
+VERSION_KEYS = ("engine_version", "python_version", "python_implementation", "numpy_version",
+                "numba_version", "machine", "cpu", "byteorder")
+SUGGESTED_TOLERANCE = 1e-9
+
+# per-row 2-vector fields, flattened x0, y0, x1, y1 ... in the log
+_VECTOR_FIELDS = {"position", "velocity", "point", "normal", "push_a", "push_b"}
+_CONTACT_KEY = ("substep", "a", "b", "slot")
+_CHANNEL_ORDER = ("/world", "/contacts", "/bodies", "/stats")
+
+
+# ---------------------------------------------------------------------------------------------
+# ULP distance
+
+_INT64_MIN = -(1 << 63)
+
+
+def _ordered(bits: int) -> int:
+    """Map float64 bits (as a signed int64) onto a line where adjacent floats differ by 1.
+
+    Positive floats keep their bits; negative floats (sign bit set, so a negative int64) are
+    reflected: -0.0 maps to 0 like +0.0, the smallest negative subnormal to -1, and so on.
+    """
+    return bits if bits >= 0 else _INT64_MIN - bits
+
+
+def ulp_distance(a: float, b: float) -> int | None:
+    """Number of float64 values between ``a`` and ``b`` (0 when equal; None if either is NaN).
+
+    Computed on the int64 view of the two doubles, sign handled by reflecting negatives, so
+    e.g. ``ulp_distance(x, np.nextafter(x, inf)) == 1`` and ``ulp_distance(-0.0, 0.0) == 0``.
+    """
+    if a != a or b != b:
+        return None
+    ia = struct.unpack("<q", struct.pack("<d", a))[0]
+    ib = struct.unpack("<q", struct.pack("<d", b))[0]
+    return abs(_ordered(ia) - _ordered(ib))
+
+
+def ulp_distances(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Element-wise `ulp_distance` of two float64 arrays, as uint64 (NaN pairs give 0)."""
+    ia = np.ascontiguousarray(a, dtype="<f8").view(np.int64)
+    ib = np.ascontiguousarray(b, dtype="<f8").view(np.int64)
+    oa = np.where(ia >= 0, ia, np.int64(_INT64_MIN) - ia)
+    ob = np.where(ib >= 0, ib, np.int64(_INT64_MIN) - ib)
+    # the difference of two int64 fits in a uint64: subtract in wrapping arithmetic, larger first
+    with np.errstate(over="ignore"):
+        d = np.where(oa >= ob, (oa - ob).view(np.uint64), (ob - oa).view(np.uint64))
+    nan = np.isnan(a) | np.isnan(b)
+    return np.where(nan, np.uint64(0), d)
+
+
+# ---------------------------------------------------------------------------------------------
+# locating a difference inside two decoded messages
+
+def _float_mismatch(la: np.ndarray, ra: np.ndarray, tolerance: float | None) -> np.ndarray:
+    """Mask of elements that differ: any bit (bitwise), or beyond tolerance."""
+    if tolerance is None:
+        return (np.ascontiguousarray(la, dtype="<f8").view(np.uint64)
+                != np.ascontiguousarray(ra, dtype="<f8").view(np.uint64))
+    with np.errstate(invalid="ignore", over="ignore"):
+        close = np.abs(la - ra) <= tolerance + tolerance * np.abs(la)
+    same_nan = np.isnan(la) & np.isnan(ra)
+    return ~(close | same_nan)
+
+
+class _Finder:
+    """Collects the differences of one channel at one step; keeps the first, counts the rest."""
+
+    def __init__(self, step: int, channel: str, tolerance: float | None) -> None:
+        self.step = step
+        self.channel = channel
+        self.tolerance = tolerance
+        self.first: Divergence | None = None
+        self.count = 0
+        self.max_ulps: int | None = None
+        self.bit_differences = 0  # values whose bits differ (within tolerance or not)
+
+    def note_ulps(self, ulps: np.ndarray) -> None:
+        if ulps.size:
+            m = int(ulps.max())
+            self.max_ulps = m if self.max_ulps is None else max(self.max_ulps, m)
+
+    def array(self, name: str, la, ra, *, is_float: bool, where: Callable[[int], dict]) -> None:
+        la = np.atleast_1d(np.asarray(la))
+        ra = np.atleast_1d(np.asarray(ra))
+        if la.shape != ra.shape:
+            self._add(Divergence(self.step, self.channel, "count", field=name,
+                                 logged=int(la.size), replayed=int(ra.size)), 1)
+            return
+        if is_float:
+            la = la.astype(np.float64, copy=False)
+            ra = ra.astype(np.float64, copy=False)
+            bits = (la.view(np.uint64) != ra.view(np.uint64))
+            n_bits = int(np.count_nonzero(bits))
+            if not n_bits:
+                return
+            self.bit_differences += n_bits
+            ulps = ulp_distances(la[bits], ra[bits])
+            self.note_ulps(ulps)
+            bad = _float_mismatch(la, ra, self.tolerance) if self.tolerance is not None else bits
+        else:
+            bad = la != ra
+            self.bit_differences += int(np.count_nonzero(bad))
+        idx = np.flatnonzero(bad)
+        if not idx.size:
+            return
+        i = int(idx[0])
+        lv, rv = la[i].item(), ra[i].item()
+        label = name
+        if name in _VECTOR_FIELDS:
+            label = f"{name}.{'xy'[i % 2]}"
+            i //= 2
+        d = Divergence(self.step, self.channel, "value", field=label, logged=lv, replayed=rv,
+                       ulps=ulp_distance(lv, rv) if is_float else None, **where(i))
+        self._add(d, int(idx.size))
+
+    def scalar(self, name: str, lv, rv, *, is_float: bool) -> None:
+        if is_float:
+            self.array(name, lv, rv, is_float=True, where=lambda i: {})
+        elif lv != rv:
+            if name == "state_hash" and self.tolerance is not None:
+                return  # a hash cannot be close: in tolerance mode it is not compared
+            self.bit_differences += 1
+            self._add(Divergence(self.step, self.channel, "value", field=name, logged=lv,
+                                 replayed=rv), 1)
+
+    def _add(self, d: Divergence, n: int) -> None:
+        self.count += n
+        if self.first is None:
+            self.first = d
+
+    def result(self) -> Divergence | None:
+        if self.first is not None:
+            self.first.differing_values = self.count
+            self.first.max_ulps = self.max_ulps
+        return self.first
+
+
+def locate(topic: str, step: int, logged: bytes, replayed: bytes, names: list,
+           tolerance: float | None = None) -> tuple[Divergence | None, int | None]:
+    """Decode two payloads of ``topic`` that differ in bytes and find where.
+
+    Returns (the first difference beyond the tolerance or None, the largest ULP distance seen).
+    Fields are visited in message order; within a field the lowest body / row index comes first.
+    """
+    message = S.TOPICS[topic]
+    try:
+        dl = S.decode(message, logged)
+    except (S.WireError, UnicodeDecodeError) as exc:
+        return Divergence(step, topic, "error", detail=f"the logged message does not decode "
+                          f"({exc})"), None
+    dr = S.decode(message, replayed)
+    f = _Finder(step, topic, tolerance)
+
+    def body(i: int) -> dict:
+        return {"body": i, "body_name": str(names[i]) if 0 <= i < len(names) else None}
+
+    spec = S.MESSAGES[message]
+    if topic == "/bodies":
+        nl, nr = dl["angle"].size, dr["angle"].size
+        if nl != nr:
+            return Divergence(step, topic, "count", field="bodies", logged=nl, replayed=nr), None
+        for name, _num, typ, repeated in spec:
+            if repeated:
+                f.array(name, dl[name], dr[name], is_float=typ == "double", where=body)
+            else:
+                f.scalar(name, dl[name], dr[name], is_float=typ == "double")
+    elif topic == "/contacts":
+        ml, mr = dl["a"].size, dr["a"].size
+
+        def row(i: int) -> dict:
+            c = {"row": i}
+            for k in _CONTACT_KEY:
+                c[k] = int(dl[k][i]) if i < dl[k].size else None
+            for side in ("a", "b"):
+                j = c[side]
+                if j is not None and 0 <= j < len(names):
+                    c[f"{side}_name"] = str(names[j])
+            return {"contact": c}
+
+        if ml != mr:
+            # the first row whose identity (sub-step, a, b, slot) differs says where it starts
+            m = min(ml, mr)
+            keys_l = np.stack([dl[k][:m].astype(np.int64) for k in _CONTACT_KEY])
+            keys_r = np.stack([dr[k][:m].astype(np.int64) for k in _CONTACT_KEY])
+            off = np.flatnonzero((keys_l != keys_r).any(axis=0))
+            i = int(off[0]) if off.size else m
+            where = row(i)["contact"] if i < ml else None
+            detail = (f"the rows agree up to row {i - 1}" if i > 0 else "row 0 already differs")
+            if where is not None:
+                detail += (f"; logged row {i} is {where.get('a_name', where['a'])!r}-"
+                           f"{where.get('b_name', where['b'])!r} slot {where['slot']}")
+            return Divergence(step, topic, "count", field="contacts", logged=ml, replayed=mr,
+                              contact=where, detail=detail), None
+        for name, _num, typ, repeated in spec:
+            if repeated:
+                f.array(name, dl[name], dr[name], is_float=typ == "double", where=row)
+            else:
+                f.scalar(name, dl[name], dr[name], is_float=typ == "double")
+    elif topic == "/stats":
+        for name, _num, typ, _repeated in spec:
+            f.scalar(name, dl[name], dr[name], is_float=typ == "double")
+    else:  # /world
+        f.scalar("step", dl["step"], dr["step"], is_float=False)
+        f.scalar("time", dl["time"], dr["time"], is_float=True)
+        bl, br = dl["bodies"], dr["bodies"]
+        if len(bl) != len(br):
+            return Divergence(step, topic, "count", field="bodies", logged=len(bl),
+                              replayed=len(br)), None
+        for i, (a, b) in enumerate(zip(bl, br)):
+            for name, _num, typ, repeated in S.MESSAGES["Body"]:
+                if repeated:
+                    f.array(name, a[name], b[name], is_float=True, where=lambda _j, i=i: body(i))
+                elif a[name] != b[name] or (typ == "double" and
+                                            ulp_distance(a[name], b[name]) != 0):
+                    if typ == "double":
+                        f.array(name, a[name], b[name], is_float=True,
+                                where=lambda _j, i=i: body(i))
+                    else:
+                        f.bit_differences += 1
+                        f._add(Divergence(step, topic, "value", field=name, logged=a[name],
+                                          replayed=b[name], **body(i)), 1)
+    return f.result(), f.max_ulps
+
+
+# ---------------------------------------------------------------------------------------------
+# checks on the log's header
+
+def versions_note(logged: dict, here: dict, *, what: str = "here",
+                  suggest: bool = True) -> str | None:
+    """A note when the versions or the machine differ (None when they all agree)."""
+    diffs = []
+    for key in VERSION_KEYS:
+        a, b = logged.get(key), here.get(key)
+        if a != b:
+            diffs.append(f"{key.replace('_version', '')} {a or '?'} in the log, {b or '?'} {what}")
+    os_a = (logged.get("platform") or "?").split("-")[0]
+    os_b = (here.get("platform") or "?").split("-")[0]
+    if os_a != os_b:
+        diffs.append(f"system {os_a} in the log, {os_b} {what}")
+    if not diffs:
+        return None
+    text = "versions or platform differ (" + "; ".join(diffs) + ")"
+    if suggest:
+        text += (": bit-identical results are promised only for one version on one machine; "
+                 f"compare with --tolerance {SUGGESTED_TOLERANCE:g} instead")
+    return text
+
+
+def load_embedded_scene(log: RawLog) -> tuple[Scene, list[str]]:
+    """The log's embedded scene, validated and checked against its recorded sha256.
+
+    Returns (scene, notes). Raises LogError if the scene text was altered (its sha256 does not
+    match the metadata) and SceneError if it fails validation.
+    """
+    text = log.scene_text
+    recorded = log.metadata.get("scene_sha256")
+    actual = hashlib.sha256(text.encode("utf-8")).hexdigest()
+    if recorded is None:
+        raise LogError(f"{log.path}: the log's metadata has no scene_sha256")
+    if recorded != actual:
+        raise LogError(f"{log.path}: the embedded scene does not match its recorded sha256 "
+                       f"(the log was altered or is corrupt)")
+    scene = load_scene_text(text, source=f"{log.path}:scene.yaml")
+    notes = []
+    ours = json.loads(json.dumps(asdict(scene.world), sort_keys=True))
+    theirs = log.header.settings
+    changed = sorted(k for k in set(ours) | set(theirs) if ours.get(k) != theirs.get(k))
+    if changed:
+        notes.append("this version reads the embedded scene's world settings differently from "
+                     "the log's recorded settings: " + ", ".join(
+                         f"{k} (log {theirs.get(k)!r}, now {ours.get(k)!r})" for k in changed))
+    return scene, notes
+
+
+def _truncation(log: RawLog, last: int | None, report: Report) -> None:
+    """Say when the log was cut short or the run did not finish."""
+    end = log.end
+    last_text = "no complete step" if last is None else f"step {last}"
+    if log.closed_cleanly and log.damage:
+        # a finished file that cannot be read to its end: corrupt, not cut
+        report.truncated = True
+        logged_last = (end or {}).get("last_step") or "?"
+        report.truncated_detail = (f"the log is damaged: reading stopped at {log.damage}; "
+                                   f"replayed up to {last_text} of the {logged_last} it holds")
+    elif not log.closed_cleanly or end is None:
+        why = "the log was not closed (the run crashed or was killed, or the file was cut)"
+        if log.damage:
+            why += f"; reading stopped at {log.damage}"
+        report.truncated = True
+        report.truncated_detail = f"{why}; replayed up to its last complete step, {last_text}"
+        if log.incomplete_tail is not None:
+            report.truncated_detail += f" (step {log.incomplete_tail} was only partly written)"
+    elif end.get("complete") != "true":
+        reason = end.get("reason") or "no reason given"
+        report.notes.append(f"the logged run did not finish: stopped at step "
+                            f"{end.get('stopped_at') or '?'} ({reason})")
+
+
+# ---------------------------------------------------------------------------------------------
+# replay
+
+def _logged_record(raw: RawStep) -> StepRecord:
+    try:
+        bodies = S.decode("Bodies", raw.messages["/bodies"])
+        contacts = S.decode("Contacts", raw.messages["/contacts"])
+        return record_from_messages(bodies, contacts)
+    except (S.WireError, UnicodeDecodeError, ValueError) as exc:
+        raise LogError(f"step {raw.step}: the logged state does not decode ({exc})") from None
+
+
+def _compare_step(raw: RawStep, ours: dict, names: list, tolerance: float | None,
+                  report: Report, *, sides: tuple[str, str] = ("logged", "replayed")
+                  ) -> tuple[bool, bool]:
+    """Compare one step's payloads. Returns (bytes all equal, beyond tolerance somewhere)."""
+    found = []
+    equal = True
+    for topic in _CHANNEL_ORDER:
+        mine = ours.get(topic)
+        theirs = raw.messages.get(topic)
+        if mine is None and theirs is None:
+            continue
+        if mine is None or theirs is None:
+            equal = False
+            side = f"{sides[0]} only" if mine is None else f"{sides[1]} only"
+            found.append(Divergence(raw.step, topic, "missing", detail=(
+                f"a {topic} message is {side} (the set of existing bodies changed on one side "
+                f"only)" if topic == "/world" else f"a {topic} message is {side}")))
+            continue
+        if mine == theirs:
+            continue
+        equal = False
+        d, max_ulps = locate(topic, raw.step, theirs, mine, names, tolerance)
+        if max_ulps is not None:
+            report.max_ulps_seen = (max_ulps if report.max_ulps_seen is None
+                                    else max(report.max_ulps_seen, max_ulps))
+        if d is not None:
+            found.append(d)
+    report.add(found)
+    if not equal and not found:
+        report.within_tolerance_steps += 1
+    return equal, bool(found)
+
+
+def replay_log(path: str, *, from_step: int | None = None, to_step: int | None = None,
+               tolerance: float | None = None, all_steps: bool = False,
+               max_reported: int = DEFAULT_MAX_REPORTED,
+               on_step: Callable[[int], None] | None = None) -> Report:
+    """Re-simulate the log at ``path`` from its embedded scene and compare every step.
+
+    from_step: start from the state logged at this step (default: the scene's step 0).
+    to_step: last step to compare (default: the log's last complete step).
+    tolerance: None for bit-for-bit; else values count as equal when
+        ``|logged - replayed| <= tolerance * (1 + |logged|)`` (integers and counts stay exact).
+    all_steps: go on after a divergence (from the logged state) and list every differing step,
+        at most ``max_reported`` of them. on_step: called with each step index (progress).
+    Raises LogError / SceneError for a file that is not a readable ISAAC log or whose scene is
+    invalid; a divergence is reported, not raised.
+    """
+    from isaac.simulation import Simulation  # loads the compiled kernels
+
+    if from_step is not None and from_step < 0:
+        raise LogError(f"--from-step must be >= 0, got {from_step}")
+    if to_step is not None and from_step is not None and to_step < from_step:
+        raise LogError(f"--to-step {to_step} is before --from-step {from_step}")
+    log = RawLog(path)
+    scene, notes = load_embedded_scene(log)
+    sim = Simulation(scene)
+    model = sim.model
+    names = list(model.names)
+    gravity = tuple(float(g) for g in scene.world.gravity)
+    report = Report(mode="replay", logs=[str(path)], tolerance=tolerance,
+                    max_reported=max_reported)
+    report.notes.extend(notes)
+    here = build_metadata(scene, "", len(names))
+    note = versions_note(log.metadata, here, suggest=tolerance is None)
+    if note:
+        report.notes.append(note)
+    if log.metadata.get("bodies") not in (None, str(len(names))):
+        report.notes.append(f"the log's metadata says {log.metadata['bodies']} bodies; the "
+                            f"embedded scene has {len(names)}")
+
+    started = time.perf_counter()
+    timed_from: float | None = None
+    timed_steps = 0
+    last_exists: np.ndarray | None = None
+    last_step: int | None = None
+    go_on = all_steps or tolerance is not None
+    steps = log.steps(start=from_step or 0, stop=to_step)
+    try:
+        for raw in steps:
+            last_step = raw.step
+            if report.first_step is None and (from_step is not None or raw.step != 0):
+                # a keyframe: start from the logged state (nothing to compare at this step)
+                if from_step is not None and raw.step != from_step:
+                    raise LogError(f"{path}: step {from_step} is not in the log (the next "
+                                   f"complete step is {raw.step})")
+                if from_step is None:
+                    report.notes.append(f"the log starts at step {raw.step}: replayed from "
+                                        f"its state")
+                keyframe = _logged_record(raw)
+                sim.resume(keyframe)
+                last_exists = keyframe.exists.copy()
+                report.first_step = raw.step + 1
+                continue
+            if report.first_step is None:
+                report.first_step = raw.step
+            if sim.step_index > raw.step:
+                raise LogError(f"{path}: step {raw.step} is out of order")
+            try:
+                record = None
+                while sim.step_index < raw.step:
+                    record = sim.step()
+                    if timed_from is None:
+                        # the first step also loads the kernels: the rate is measured after it
+                        timed_from = time.perf_counter()
+                    else:
+                        timed_steps += 1
+                if record is None:
+                    record = sim.record()
+            except SimulationError as exc:
+                report.steps_compared += 1
+                report.add([Divergence(raw.step, "simulation", "error",
+                                       detail=f"the replay stopped: {exc}")])
+                if not go_on:
+                    report.stopped_early = True
+                    break
+                sim.resume(_logged_record(raw))
+                last_exists = sim.state.exists.copy()
+                continue
+            ours = {"/bodies": encode_bodies(record), "/contacts": encode_contacts(record),
+                    "/stats": encode_stats(record.step, record.time,
+                                           compute_stats(model, gravity, record))}
+            if last_exists is None or not np.array_equal(record.exists, last_exists):
+                ours["/world"] = encode_world(model, record.step, record.time, record.exists)
+                last_exists = record.exists.copy()
+            report.steps_compared += 1
+            equal, beyond = _compare_step(raw, ours, names, tolerance, report)
+            if on_step is not None:
+                on_step(raw.step)
+            if equal:
+                continue
+            if beyond and not go_on:
+                report.stopped_early = True
+                break
+            # restart from the logged state so the next step is checked on its own
+            logged = _logged_record(raw)
+            sim.resume(logged)
+            last_exists = np.array(logged.exists, dtype=bool)
+    finally:
+        steps.close()
+    finished = time.perf_counter()
+    report.elapsed_s = finished - started
+    if timed_from is not None and timed_steps > 0 and finished > timed_from:
+        report.steps_per_s = timed_steps / (finished - timed_from)
+    elif report.elapsed_s > 0:
+        report.steps_per_s = report.steps_compared / report.elapsed_s
+    if report.first_step is not None and report.steps_compared:
+        report.last_step = last_step
+    elif report.first_step is not None:
+        report.first_step = None
+    if from_step is not None and last_step is None:
+        raise LogError(f"{path}: step {from_step} is not in the log")
+    if not report.stopped_early and (to_step is None or last_step is None or last_step < to_step):
+        _truncation(log, last_step, report)
+        if to_step is not None and (last_step is None or last_step < to_step) \
+                and not report.truncated:
+            report.notes.append(f"the log ends at step {last_step}, before --to-step {to_step}")
+    return report
+
+
+# ---------------------------------------------------------------------------------------------
+# diff
+
+def _pairs(a: Iterator[RawStep], b: Iterator[RawStep]):
+    """Merge two step streams by step index: (step, raw_a or None, raw_b or None)."""
+    sa, sb = next(a, None), next(b, None)
+    while sa is not None or sb is not None:
+        if sb is None or (sa is not None and sa.step < sb.step):
+            yield sa.step, sa, None
+            sa = next(a, None)
+        elif sa is None or sb.step < sa.step:
+            yield sb.step, None, sb
+            sb = next(b, None)
+        else:
+            yield sa.step, sa, sb
+            sa, sb = next(a, None), next(b, None)
+
+
+def diff_logs(path_a: str, path_b: str, *, from_step: int | None = None,
+              to_step: int | None = None, tolerance: float | None = None,
+              all_steps: bool = False, max_reported: int = DEFAULT_MAX_REPORTED) -> Report:
+    """Compare two logs of the same scene step by step, channel by channel, like `replay_log`.
+
+    In the report, "logged" is log A and "replayed" is log B. Steps present in one complete log
+    only are a divergence; when one log is truncated the comparison stops at its end (noted).
+    """
+    log_a, log_b = RawLog(path_a), RawLog(path_b)
+    scene_a, _ = load_embedded_scene(log_a)
+    names = [b.name for b in scene_a.bodies]
+    report = Report(mode="diff", logs=[str(path_a), str(path_b)], tolerance=tolerance,
+                    max_reported=max_reported)
+    if log_a.metadata.get("scene_sha256") != log_b.metadata.get("scene_sha256"):
+        report.notes.append("the two logs embed different scenes")
+    note = versions_note(log_a.metadata, log_b.metadata, what="in B",
+                         suggest=tolerance is None)
+    if note:
+        report.notes.append(note.replace("in the log", "in A"))
+    started = time.perf_counter()
+    go_on = all_steps or tolerance is not None
+    steps_a = log_a.steps(start=from_step or 0, stop=to_step)
+    steps_b = log_b.steps(start=from_step or 0, stop=to_step)
+    last_step = None
+    try:
+        for step, ra, rb in _pairs(steps_a, steps_b):
+            if ra is None or rb is None:
+                # one log ends (or skips) here: consume the other to see whether it was cut
+                for it in (steps_a, steps_b):
+                    for _ in it:
+                        pass
+                short, other = (log_a, "A") if ra is None else (log_b, "B")
+                if short.closed_cleanly and short.end is not None:
+                    report.add([Divergence(step, "steps", "missing", detail=(
+                        f"step {step} is in {'B' if ra is None else 'A'} only (log {other} "
+                        f"ends at step {last_step})"))])
+                break
+            if report.first_step is None:
+                report.first_step = step
+            last_step = step
+            report.steps_compared += 1
+            _equal, beyond = _compare_step(ra, rb.messages, names, tolerance, report,
+                                           sides=("in A", "in B"))
+            if beyond and not go_on:
+                report.stopped_early = True
+                break
+    finally:
+        steps_a.close()
+        steps_b.close()
+    report.elapsed_s = time.perf_counter() - started
+    report.last_step = last_step
+    if report.elapsed_s > 0:
+        report.steps_per_s = report.steps_compared / report.elapsed_s
+    if not report.stopped_early:
+        for label, log in (("A", log_a), ("B", log_b)):
+            sub = Report(mode="diff", logs=[])
+            _truncation(log, last_step, sub)
+            if sub.truncated:
+                report.truncated = True
+                detail = sub.truncated_detail.replace("replayed up to its last complete step",
+                                                      "compared up to the last common step")
+                joined = report.truncated_detail + "; " if report.truncated_detail else ""
+                report.truncated_detail = joined + f"log {label}: {detail}"
+            report.notes.extend(f"log {label}: {n}" for n in sub.notes)
+    return report
