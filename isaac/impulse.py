@@ -139,8 +139,8 @@ def solve_contacts(rows, c_a, c_b, c_slot, c_point, c_normal, c_depth, c_previou
         c_restitution[k] = e
         if gap <= 0.0:
             rc[k, TARGET] = -e * arrived
-        elif hits:
-            rc[k, TARGET] = max(-gap / h, -e * arrived)
+        elif hits and e > 0.0:
+            rc[k, TARGET] = -e * arrived  # bounces now (>= 0 > -gap / h), up to gap early
         else:
             rc[k, TARGET] = -gap / h
         c_impulse[k] = 0.0

@@ -187,7 +187,8 @@ def substep(model: Model, cfg: StepSettings, state: State, work: Workspace,
     rows = detect(model, cfg, state, work, cache)
     # 4. push-out
     push_out(rows, work.a, work.b, work.feature, work.slot, work.point, work.normal,
-             work.pair_depth, model.inv_mass, state.position, cfg.correction_mode, cfg.slop,
+             work.pair_depth, model.inv_mass, model.thickness, state.position,
+             cfg.correction_mode, cfg.slop,
              cfg.correction, cfg.position_iterations, work.push_a, work.push_b)
     # 5. impulses (semi-implicit Euler: gravity first, so contacts see it)
     if not cfg.explicit:

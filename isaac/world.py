@@ -30,6 +30,9 @@ class Model:
     normals_local: (n, V, 2) outward unit normal of edge k (vertex k to k+1), body frame.
     vertex_count: (n,) int64 number of vertices of each body (3..50).
     radius: (n,) the seed's MaxDist: largest distance from centre of mass to a vertex (m).
+    thickness: (n,) the polygon's smallest width (m): over its edges, the largest depth of the
+        polygon behind the edge, minimised. Tolerances that must stay below a body's size (the
+        push-out's slop) are capped by it.
     mass: (n,) kg, area * density (also for concrete bodies, for information).
     inertia: (n,) kg m^2 about the centre of mass.
     inv_mass, inv_inertia: (n,) 1/kg, 1/(kg m^2); 0 for concrete bodies.
@@ -46,6 +49,7 @@ class Model:
     normals_local: np.ndarray
     vertex_count: np.ndarray
     radius: np.ndarray
+    thickness: np.ndarray
     mass: np.ndarray
     inertia: np.ndarray
     inv_mass: np.ndarray
@@ -112,6 +116,7 @@ def build_model(scene: Scene) -> Model:
     normals = np.zeros((n, width, 2))
     count = np.zeros(n, dtype=np.int64)
     radius = np.zeros(n)
+    thickness = np.zeros(n)
     mass = np.zeros(n)
     inertia = np.zeros(n)
     for i, body in enumerate(scene.bodies):
@@ -129,6 +134,10 @@ def build_model(scene: Scene) -> Model:
         normals[i, k:] = normals[i, k - 1]
         count[i] = k
         radius[i] = np.sqrt(np.max(local[:, 0] ** 2 + local[:, 1] ** 2))
+        # depth of every vertex behind every edge: -n_k . (v_j - v_k), shape (edges, vertices)
+        behind = -(normals[i, :k, None, 0] * (local[None, :, 0] - local[:, None, 0])
+                   + normals[i, :k, None, 1] * (local[None, :, 1] - local[:, None, 1]))
+        thickness[i] = behind.max(axis=1).min()
         mass[i] = area * body.density
         inertia[i] = second_moment * body.density
     concrete = np.array([b.concrete for b in scene.bodies], dtype=bool)
@@ -143,6 +152,7 @@ def build_model(scene: Scene) -> Model:
         normals_local=normals,
         vertex_count=count,
         radius=radius,
+        thickness=thickness,
         mass=mass,
         inertia=inertia,
         inv_mass=inv_mass,
