@@ -1,0 +1,155 @@
+"""Recording overhead (MCAP, Rerun) and replay speed, in a process of their own.
+
+`python -m bench.recording --scene pyramid-20 --preset balanced --out DIR` prints one JSON line:
+ms/step of ISAAC alone, with the MCAP log, with the Rerun recording and with both (interleaved
+repetitions, medians), the overhead of each (ms/step above the plain run) and, when the
+`isaac replay` command is there, the replay speed of the MCAP log (steps/s, whole process, so
+start-up is included and stated).
+
+Each part is skipped with a note when what it needs (the recorder, a writer, the replay command)
+is not importable yet, so the suite lights up as those land.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import statistics
+import subprocess
+import sys
+import time
+
+from bench.scenes import build, with_preset
+
+
+def _time_run(scene, steps: int, mcap_path=None, rrd_path=None) -> float:
+    """ms/step of `steps` steps, each record written when a path is given (close included)."""
+    from isaac.simulation import Simulation
+
+    sim = Simulation(scene)
+    if mcap_path is None and rrd_path is None:
+        t0 = time.perf_counter()
+        for _ in range(steps):
+            sim.step()
+        return 1000.0 * (time.perf_counter() - t0) / steps
+    from recorder import Recorder
+
+    t0 = time.perf_counter()
+    rec = Recorder(sim, mcap_path=mcap_path, rrd_path=rrd_path)
+    rec.write(sim.record())
+    for _ in range(steps):
+        rec.write(sim.step())
+    rec.close()
+    return 1000.0 * (time.perf_counter() - t0) / steps
+
+
+def _available(module: str) -> str | None:
+    """None if `module` imports, else the reason."""
+    import importlib
+
+    try:
+        importlib.import_module(module)
+    except Exception as exc:  # noqa: BLE001 - any failure means "not there yet"
+        return f"{module}: {type(exc).__name__}: {exc}"
+    return None
+
+
+def run(scene_name: str, preset: str, out_dir: str, reps: int, steps: int) -> dict:
+    bench = build(scene_name)
+    scene = with_preset(bench.scene, preset)
+    result: dict = {"kind": "recording", "scene": scene_name, "engine": f"isaac-{preset}",
+                    "steps": steps, "reps": reps, "notes": []}
+    modes = {"plain": {}}
+    missing = _available("recorder")
+    if missing:
+        result["notes"].append(f"recording skipped: {missing}")
+    else:
+        for mode, module, key in (("mcap", "recorder.mcap_writer", "mcap_path"),
+                                  ("rerun", "recorder.rerun_writer", "rrd_path")):
+            why = _available(module)
+            if why:
+                result["notes"].append(f"{mode} skipped: {why}")
+            else:
+                ext = "mcap" if mode == "mcap" else "rrd"
+                modes[mode] = {key: os.path.join(out_dir, f"bench-{scene_name}.{ext}")}
+        if "mcap" in modes and "rerun" in modes:
+            modes["both"] = {**modes["mcap"], **modes["rerun"]}
+    _time_run(scene, 20)  # load the compiled kernels outside the clock
+    times: dict[str, list[float]] = {m: [] for m in modes}
+    errors: dict[str, str] = {}
+    for _ in range(reps):
+        for mode, paths in modes.items():
+            if mode in errors:
+                continue
+            try:
+                times[mode].append(_time_run(scene, steps, **paths))
+            except Exception as exc:  # noqa: BLE001 - a writer in progress: note it, go on
+                errors[mode] = f"{type(exc).__name__}: {exc}"
+    for mode, why in errors.items():
+        result["notes"].append(f"{mode} failed: {why}")
+    medians = {m: statistics.median(t) for m, t in times.items() if t}
+    result["ms_per_step"] = medians
+    if "plain" in medians:
+        result["overhead_ms_per_step"] = {m: v - medians["plain"] for m, v in medians.items()
+                                          if m != "plain"}
+    for mode in ("mcap", "rerun"):
+        if mode in medians and mode in modes:
+            path = next(iter(modes[mode].values()))
+            if os.path.exists(path):
+                result[f"{mode}_bytes_per_step"] = os.path.getsize(path) / (steps + 1)
+    mcap_path = modes.get("mcap", {}).get("mcap_path")
+    if mcap_path and os.path.exists(mcap_path) and "mcap" not in errors:
+        result["replay"] = replay_speed(mcap_path, steps)
+        loop = result["replay"].get("loop_steps_per_s")
+        if loop and "plain" in medians:
+            # replay time per step over the plain run's time per step
+            result["replay"]["time_ratio_to_run"] = (1000.0 / loop) / medians["plain"]
+    else:
+        result["replay"] = {"note": "replay skipped: no MCAP log was written"}
+    return result
+
+
+def replay_speed(mcap_path: str, steps: int) -> dict:
+    """Time `isaac replay LOG.mcap` (re-simulate and compare bit for bit) as a whole process, and
+    read the loop rate it reports itself (`--json`: steps/s after the first step, when the
+    command offers it)."""
+    why = _available("replay.cli")
+    if why:
+        return {"note": f"replay skipped: {why}"}
+    report = mcap_path + ".replay.json"
+    cmd = [sys.executable, "-m", "isaac", "replay", mcap_path, "--json", report]
+    t0 = time.perf_counter()
+    proc = subprocess.run(cmd, capture_output=True, text=True, check=False)
+    whole = time.perf_counter() - t0
+    out = {"command": f"isaac replay LOG.mcap --json ({steps} steps)", "seconds": whole,
+           "exit_status": proc.returncode, "identical": proc.returncode == 0,
+           "steps_per_s": steps / whole, "note": "whole process, start-up included"}
+    if os.path.exists(report):
+        with open(report) as f:
+            data = json.load(f)
+        if "steps_per_s" in data:
+            out["loop_steps_per_s"] = data["steps_per_s"]
+        if "identical" in data:
+            out["identical"] = bool(data["identical"])
+    if proc.returncode != 0:
+        out["stderr"] = (proc.stderr or proc.stdout).strip().splitlines()[-1:]
+    return out
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m bench.recording")
+    parser.add_argument("--scene", default="pyramid-20")
+    parser.add_argument("--preset", default="balanced")
+    parser.add_argument("--out", default="bench/results")
+    parser.add_argument("--reps", type=int, default=3)
+    parser.add_argument("--steps", type=int, default=300)
+    args = parser.parse_args(argv)
+    os.makedirs(args.out, exist_ok=True)
+    result = run(args.scene, args.preset, args.out, args.reps, args.steps)
+    sys.stdout.write(json.dumps(result) + "\n")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

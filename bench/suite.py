@@ -1,0 +1,498 @@
+"""The benchmark suite: `python -m bench` (what `make bench` runs).
+
+What it does, in order:
+1. For each scene, `reps` repetitions of every engine interleaved (A B C A B C ...), each run in
+   its own process (`bench.worker`): ms/step over a timed block after warm-up (compile and
+   start-up excluded), memory per body, and a quality figure from the final poses measured by
+   the same code for every engine (bench.quality).
+2. Medians over repetitions; each engine's ratio to pymunk is computed per repetition (the same
+   run) and the median of those ratios is reported.
+3. Growth: least-squares slope of log(ms/step) against log(bodies) over the piles.
+4. Start-up: first run (fresh NUMBA_CACHE_DIR: compile included) and cached start-up to the
+   first step, each a whole `python -c` process timed from outside.
+5. Recording overhead (MCAP, Rerun) and replay speed (`bench.recording`), skipped with a note
+   while the recorder or the replay command is not there.
+6. Targets (from the issue) against the measurements.
+
+Output: bench/results/latest.jsonl (one JSON object a line: `meta`, every `run`, the aggregated
+`row`s, `growth`, `startup`, `recording`, `targets`) and bench/results/latest.md (the tables),
+also printed. A run with any selection flag (`--quick`, `--scenes`, ...) writes partial.jsonl /
+partial.md instead, so the published results are always a full run. After a full run, if
+README.md holds the markers `<!-- bench:start -->` and `<!-- bench:end -->`, the tables replace
+what is between them (`--no-readme` to leave it alone).
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime as _dt
+import json
+import math
+import os
+import platform
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from bench.peers import PEERS, engine_available
+from bench.scenes import ALL_SCENES, GROWTH_SCENES, QUICK_SCENES
+
+ROOT = Path(__file__).resolve().parent.parent
+RESULTS = Path(__file__).resolve().parent / "results"
+README_START = "<!-- bench:start -->"
+README_END = "<!-- bench:end -->"
+DEFAULT_PRESETS = ("fast", "balanced")
+BASELINE = "pymunk"
+
+# the issue's targets for ISAAC: (what, limit)
+TARGETS = (
+    ("ratio", "pile-2000", 0.8),
+    ("ratio", "pyramid-40", 0.8),
+    ("ratio", "pile-100", 1.5),
+    ("growth", None, 1.15),
+    ("startup_cached_s", None, 1.5),
+    ("startup_first_s", None, 15.0),
+)
+
+
+def log(msg: str) -> None:
+    print(msg, file=sys.stderr, flush=True)
+
+
+def python_cmd(module: str, *args: str) -> list[str]:
+    return [sys.executable, "-m", module, *args]
+
+
+def subprocess_env(**extra: str) -> dict[str, str]:
+    env = dict(os.environ)
+    env["PYTHONPATH"] = str(ROOT) + os.pathsep + env.get("PYTHONPATH", "")
+    env.update(extra)
+    return env
+
+
+def run_worker(scene: str, engine: str, timeout: float) -> dict:
+    """One (scene, engine) repetition in a fresh process; a failure becomes a row with `error`."""
+    cmd = python_cmd("bench.worker", "--scene", scene, "--engine", engine)
+    try:
+        proc = subprocess.run(cmd, capture_output=True, text=True, cwd=ROOT, env=subprocess_env(),
+                              timeout=timeout)
+    except subprocess.TimeoutExpired:
+        return dict(scene=scene, engine=engine, error=f"timed out after {timeout:.0f} s")
+    if proc.returncode != 0:
+        tail = (proc.stderr or "").strip().splitlines()[-1:] or [f"exit {proc.returncode}"]
+        return dict(scene=scene, engine=engine, error=tail[0])
+    return json.loads(proc.stdout.strip().splitlines()[-1])
+
+
+# ---- aggregation ----------------------------------------------------------------------------
+
+def quality_text(q: dict | None) -> str:
+    """One short phrase per scene kind, for the table."""
+    if not q:
+        return ""
+    bad = "" if q.get("finite", True) else "NON-FINITE; "
+    if "standing" in q:
+        state = "stands" if q["standing"] else "FALLS"
+        return (f"{bad}{state}: top drift {q['top_drift_m']:.3f} m; any box: sideways "
+                f"{q['max_sideways_m']:.2f} m, sink {q['max_sink_m']:.2f} m, turn "
+                f"{q['max_turn_rad']:.2f} rad; max overlap {q['max_overlap_m']:.3f} m")
+    if "holds" in q:
+        state = "holds" if q["holds"] else "FAILS"
+        return (f"{bad}{state}: heavy box dropped {q['heavy_drop_m']:.3f} m, "
+                f"max overlap {q['max_overlap_m']:.3f} m")
+    if "max_overlap_m" in q:
+        return (f"{bad}max overlap {q['max_overlap_m']:.4f} m (p99 {q['p99_overlap_m']:.4f} m, "
+                f"{q['touching_pairs']} pairs)")
+    if "exchange_error_mps" in q:
+        v = q["final_velocities_x"]
+        return (f"{bad}exchange error {q['exchange_error_mps']:.2e} m/s "
+                f"(final vx {v[0]:.3f}, {v[1]:.3f}; expected -1, 3)")
+    if "stopped" in q:
+        return f"{bad}stopped {q['stopped']}/{q['lanes']} bullets at 200 m/s"
+    return bad + json.dumps(q)
+
+
+def aggregate(runs: list[dict], scenes: list[str], engines: list[str]) -> list[dict]:
+    """Median ms/step per (scene, engine) and the median of per-repetition ratios to pymunk."""
+    rows = []
+    for scene in scenes:
+        by_engine: dict[str, list[dict]] = {}
+        for r in runs:
+            if r["scene"] == scene:
+                by_engine.setdefault(r["engine_arg"], []).append(r)
+        base = by_engine.get(BASELINE, [])
+        for engine in engines:
+            reps = by_engine.get(engine, [])
+            ok = [r for r in reps if "error" not in r]
+            if not reps:
+                continue
+            if not ok:
+                rows.append(dict(kind="row", scene=scene, engine=engine, error=reps[0]["error"]))
+                continue
+            ms = [r["ms_per_step"] for r in ok]
+            base_ms = {b["rep"]: b["ms_per_step"] for b in base if "error" not in b}
+            ratios = [r["ms_per_step"] / base_ms[r["rep"]] for r in ok if r["rep"] in base_ms]
+            first = ok[0]
+            rows.append(dict(
+                kind="row", scene=scene, engine=first["engine"], engine_arg=engine,
+                settings=first["settings"], n_bodies=first["n_bodies"], reps=len(ok),
+                ms_per_step=statistics.median(ms), ms_per_step_min=min(ms),
+                ms_per_step_max=max(ms), steps_per_s=1000.0 / statistics.median(ms),
+                ratio_to_pymunk=statistics.median(ratios) if ratios else None,
+                memory_per_body_bytes=statistics.median(r["memory_per_body_bytes"] for r in ok),
+                timed_steps=first["timed_steps"], warmup_steps=first["warmup_steps"],
+                quality=first["quality"], quality_text=quality_text(first["quality"]),
+                quality_varies=any(r["quality"] != first["quality"] for r in ok),
+                scene_source=first.get("scene_source")))
+    return rows
+
+
+def growth(rows: list[dict]) -> list[dict]:
+    """Per engine: slope of log(ms/step) vs log(bodies) over the piles (least squares)."""
+    out = []
+    engines = sorted({r["engine_arg"] for r in rows if "error" not in r})
+    for engine in engines:
+        pts = [(r["n_bodies"], r["ms_per_step"]) for r in rows
+               if r.get("engine_arg") == engine and r["scene"] in GROWTH_SCENES
+               and "error" not in r]
+        if len(pts) < 2:
+            continue
+        n, ms = np.log([p[0] for p in pts]), np.log([p[1] for p in pts])
+        slope, intercept = np.polyfit(n, ms, 1)
+        out.append(dict(kind="growth", engine=engine, exponent=float(slope),
+                        bodies=[p[0] for p in pts], ms_per_step=[p[1] for p in pts]))
+    return out
+
+
+# ---- start-up and compile -------------------------------------------------------------------
+
+STARTUP_CODE = """\
+from bench.peers import make_engine
+from bench.scenes import build
+engine = make_engine({engine!r}, build('pyramid-10').scene)
+engine.step()
+"""
+
+
+def startup(engines: list[str], reps: int) -> list[dict]:
+    """Whole-process time of `python -c` (import, build pyramid-10, first step).
+
+    ISAAC: first run with a fresh, empty NUMBA_CACHE_DIR (every kernel compiled), then `reps`
+    runs with that cache filled (cached start-up). Peers: `reps` runs (nothing to compile)."""
+    out = []
+    for engine in engines:
+        code = STARTUP_CODE.format(engine=engine)
+
+        def once(env: dict[str, str], code: str = code) -> float:
+            t0 = time.perf_counter()
+            proc = subprocess.run([sys.executable, "-c", code], cwd=ROOT, env=env,
+                                  capture_output=True, text=True, timeout=600)
+            elapsed = time.perf_counter() - t0
+            if proc.returncode != 0:
+                raise RuntimeError((proc.stderr or "").strip().splitlines()[-1:])
+            return elapsed
+
+        try:
+            with tempfile.TemporaryDirectory(prefix="isaac-numba-") as cache:
+                env = subprocess_env(NUMBA_CACHE_DIR=cache)
+                first = once(env) if engine.startswith("isaac") else None
+                cached = [once(env) for _ in range(reps)]
+            out.append(dict(kind="startup", engine=engine, first_run_s=first,
+                            cached_s=statistics.median(cached), cached_runs_s=cached,
+                            what="python -c: import, build pyramid-10, first step "
+                                 "(whole process, interpreter start-up included)"))
+        except Exception as exc:  # noqa: BLE001 - report, go on
+            out.append(dict(kind="startup", engine=engine, error=str(exc)))
+        log(f"  startup {engine}: {out[-1]}")
+    return out
+
+
+# ---- recording ------------------------------------------------------------------------------
+
+def recording(preset: str, reps: int, steps: int) -> dict:
+    with tempfile.TemporaryDirectory(prefix="isaac-bench-rec-") as tmp:
+        cmd = python_cmd("bench.recording", "--scene", "pyramid-20", "--preset", preset,
+                         "--out", tmp, "--reps", str(reps), "--steps", str(steps))
+        proc = subprocess.run(cmd, capture_output=True, text=True, cwd=ROOT,
+                              env=subprocess_env(), timeout=900)
+    if proc.returncode != 0:
+        tail = (proc.stderr or "").strip().splitlines()[-1:] or [f"exit {proc.returncode}"]
+        return dict(kind="recording", engine=f"isaac-{preset}", error=tail[0])
+    return json.loads(proc.stdout.strip().splitlines()[-1])
+
+
+# ---- targets --------------------------------------------------------------------------------
+
+def check_targets(rows, growth_rows, startup_rows, isaac_engines) -> list[dict]:
+    out = []
+    for engine in isaac_engines:
+        for what, scene, limit in TARGETS:
+            value = None
+            if what == "ratio":
+                value = next((r.get("ratio_to_pymunk") for r in rows
+                              if r.get("engine_arg") == engine and r["scene"] == scene), None)
+                label = f"ms/step {engine}/pymunk, {scene}"
+            elif what == "growth":
+                value = next((g["exponent"] for g in growth_rows if g["engine"] == engine), None)
+                label = "growth exponent (piles)"
+            else:
+                key = "cached_s" if what == "startup_cached_s" else "first_run_s"
+                value = next((s.get(key) for s in startup_rows if s["engine"] == engine), None)
+                label = ("cached start-up to first step (s)" if key == "cached_s"
+                         else "first-run compile, start-up to first step (s)")
+            out.append(dict(kind="target", engine=engine, what=label, limit=limit, value=value,
+                            met=None if value is None else bool(value <= limit)))
+    return out
+
+
+# ---- output ---------------------------------------------------------------------------------
+
+def fmt(x, digits: int = 3) -> str:
+    if x is None:
+        return "–"
+    if isinstance(x, float):
+        return f"{x:.{digits}g}" if x == 0 or abs(x) >= 0.001 else f"{x:.2e}"
+    return str(x)
+
+
+def markdown(meta, rows, growth_rows, startup_rows, rec, targets) -> str:
+    lines = [f"Benchmark of {meta['date_utc']} on {meta['machine']} ({meta['cpus']} CPUs), "
+             f"Python {meta['python']}, {meta['versions']}; git {meta['git']}. "
+             f"dt = 1/60 s, no sleeping, friction on (except head-on and tunneling); "
+             f"{meta['reps']} repetitions per engine, interleaved, each in its own process; "
+             "medians. Ratio = median over repetitions of (engine / pymunk) from the same "
+             "repetition. Memory per body = (RSS after build and warm-up - RSS before build) / "
+             "bodies.", ""]
+    lines += ["| scene | bodies | engine | settings | ms/step | steps/s | ratio to pymunk | "
+              "memory/body | quality |",
+              "|---|---|---|---|---|---|---|---|---|"]
+    for r in rows:
+        if "error" in r:
+            lines.append(f"| {r['scene']} | | {r['engine']} | | error: {r['error']} | | | | |")
+            continue
+        spread = f" ({fmt(r['ms_per_step_min'])}–{fmt(r['ms_per_step_max'])})"
+        mem = r["memory_per_body_bytes"]
+        mem_text = f"{mem / 1024:.2f} kB" if r["n_bodies"] >= 500 else "–"
+        lines.append(
+            f"| {r['scene']} | {r['n_bodies']} | {r['engine']} | {r['settings']} | "
+            f"{fmt(r['ms_per_step'])}{spread} | {r['steps_per_s']:.0f} | "
+            f"{fmt(r['ratio_to_pymunk'])} | {mem_text} | {r['quality_text']} |")
+    steps = {}
+    for r in rows:
+        steps.setdefault((r.get("warmup_steps"), r.get("timed_steps")), []).append(r["scene"])
+    steps_text = "; ".join(f"{', '.join(dict.fromkeys(names))}: {w} + {t}"
+                           for (w, t), names in steps.items() if w is not None)
+    lines += ["", f"Steps (warm-up + timed): {steps_text}. ms/step is the timed block's mean; "
+              "quality is measured on the final poses. Pile overlap is "
+              "the deepest SAT penetration over all touching pairs (bench/quality.py, the same "
+              "code for every engine); Box2D rests polygons on a 1 cm skin, so it shows little "
+              "overlap. A pyramid stands while no box has moved half a box sideways or down nor "
+              "turned 0.1 rad. Memory per body is shown from 500 bodies up (page-size noise "
+              "below).", ""]
+    if growth_rows:
+        lines += ["| engine | growth exponent (ms/step vs bodies, piles) | points |",
+                  "|---|---|---|"]
+        for g in growth_rows:
+            pts = ", ".join(f"{n}: {fmt(m)}"
+                            for n, m in zip(g["bodies"], g["ms_per_step"], strict=True))
+            lines.append(f"| {g['engine']} | {g['exponent']:.3f} | {pts} |")
+        lines.append("")
+    if startup_rows:
+        lines += ["| engine | first run (compile), s | cached start-up to first step, s |",
+                  "|---|---|---|"]
+        for s in startup_rows:
+            if "error" in s:
+                lines.append(f"| {s['engine']} | error: {s['error']} | |")
+            else:
+                lines.append(f"| {s['engine']} | {fmt(s['first_run_s'])} | {fmt(s['cached_s'])} |")
+        lines += ["", "Start-up: whole `python -c` process (import, build pyramid-10, first step); "
+                  "first run with an empty NUMBA_CACHE_DIR.", ""]
+    if rec:
+        if "error" in rec:
+            lines += [f"Recording: error: {rec['error']}", ""]
+        else:
+            ms = rec.get("ms_per_step", {})
+            over = rec.get("overhead_ms_per_step", {})
+            lines += [f"Recording overhead, {rec['engine']} on {rec['scene']} ({rec['steps']} "
+                      "steps, median of interleaved repetitions):", "",
+                      "| mode | ms/step | overhead ms/step | bytes/step |", "|---|---|---|---|"]
+            for mode, v in ms.items():
+                size = rec.get(f"{mode}_bytes_per_step")
+                lines.append(f"| {mode} | {fmt(v)} | {fmt(over.get(mode))} | "
+                             f"{fmt(size) if size else '–'} |")
+            rp = rec.get("replay", {})
+            if "steps_per_s" in rp:
+                loop = rp.get("loop_steps_per_s")
+                loop_text = ""
+                if loop:
+                    loop_text = f"; its own loop rate {loop:.0f} steps/s"
+                    if rp.get("time_ratio_to_run"):
+                        loop_text += f", {rp['time_ratio_to_run']:.2f}x the plain run's ms/step"
+                verdict = ("identical" if rp["identical"]
+                           else f"NOT identical (exit {rp['exit_status']})")
+                lines.append(f"\nReplay: `{rp['command']}`: {rp['seconds']:.2f} s whole process, "
+                             f"start-up included ({rp['steps_per_s']:.0f} steps/s){loop_text}; "
+                             f"{verdict}.")
+            elif rp.get("note"):
+                lines.append(f"\n{rp['note']}")
+            for note in rec.get("notes", []):
+                lines.append(f"\nNote: {note}")
+            lines.append("")
+    if targets:
+        lines += ["| target | engine | limit | measured | met |", "|---|---|---|---|---|"]
+        for t in targets:
+            met = "–" if t["met"] is None else ("yes" if t["met"] else "**no**")
+            lines.append(f"| {t['what']} | {t['engine']} | <= {t['limit']} | {fmt(t['value'])} | "
+                         f"{met} |")
+        lines.append("")
+    if meta.get("skipped"):
+        lines += [f"Skipped: {s}" for s in meta["skipped"]] + [""]
+    return "\n".join(lines)
+
+
+def update_readme(text: str, path: Path) -> bool:
+    if not path.exists():
+        return False
+    readme = path.read_text()
+    if README_START not in readme or README_END not in readme:
+        return False
+    head, rest = readme.split(README_START, 1)
+    _, tail = rest.split(README_END, 1)
+    path.write_text(f"{head}{README_START}\n{text}\n{README_END}{tail}")
+    return True
+
+
+def meta_info(reps: int, skipped: list[str]) -> dict:
+    from importlib.metadata import PackageNotFoundError, version
+
+    versions = []
+    for pkg in ("pymunk", "box2d", "numpy", "numba"):
+        try:
+            versions.append(f"{pkg} {version(pkg)}")
+        except PackageNotFoundError:
+            pass
+    try:
+        git = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=ROOT, check=False,
+                             capture_output=True, text=True).stdout.strip() or "?"
+        dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"],
+                               cwd=ROOT, check=False, capture_output=True, text=True).stdout
+        if dirty.strip():
+            git += " + uncommitted changes"
+    except OSError:
+        git = "?"
+    return dict(kind="meta",
+                date_utc=_dt.datetime.now(_dt.UTC).strftime("%Y-%m-%d %H:%M UTC"),
+                machine=f"{platform.machine()} {platform.processor() or platform.system()}",
+                cpus=os.cpu_count(), python=platform.python_version(),
+                versions=", ".join(versions), git=git, reps=reps, skipped=skipped)
+
+
+# ---- main -----------------------------------------------------------------------------------
+
+def parse_args(argv):
+    p = argparse.ArgumentParser(prog="python -m bench", description=__doc__.split("\n")[0])
+    p.add_argument("--quick", action="store_true",
+                   help=f"a fast subset: {', '.join(QUICK_SCENES)}; 2 repetitions; no extras")
+    p.add_argument("--scenes", help=f"comma-separated, from: {', '.join(ALL_SCENES)}")
+    p.add_argument("--engines", help="comma-separated: pymunk, box2d, isaac (default: all three)")
+    p.add_argument("--presets", default=",".join(DEFAULT_PRESETS),
+                   help="ISAAC presets, one row each (default: %(default)s)")
+    p.add_argument("--reps", type=int, help="repetitions per engine (default 5, quick 2)")
+    p.add_argument("--no-startup", action="store_true", help="skip compile / start-up timing")
+    p.add_argument("--no-recording", action="store_true", help="skip recording and replay")
+    p.add_argument("--out", default=str(RESULTS), help="results directory (default: %(default)s)")
+    p.add_argument("--no-readme", action="store_true",
+                   help="do not write the tables into README.md between the bench markers")
+    p.add_argument("--timeout", type=float, default=600.0, help="per-process limit (s)")
+    return p.parse_args(argv)
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = parse_args(argv)
+    scenes = args.scenes.split(",") if args.scenes else list(
+        QUICK_SCENES if args.quick else ALL_SCENES)
+    unknown = [s for s in scenes if s not in ALL_SCENES]
+    if unknown:
+        print(f"bench: unknown scene(s) {', '.join(unknown)}; known: {', '.join(ALL_SCENES)}",
+              file=sys.stderr)
+        return 2
+    reps = args.reps or (2 if args.quick else 5)
+    wanted = args.engines.split(",") if args.engines else [*PEERS, "isaac"]
+    presets = [p for p in args.presets.split(",") if p]
+    engines, skipped = [], []
+    for name in wanted:
+        names = [f"isaac-{p}" for p in presets] if name == "isaac" else [name]
+        ok, why = engine_available(names[0])
+        if ok:
+            engines += names
+        else:
+            skipped.append(f"{name}: not available ({why})")
+            log(f"bench: skipping {name}: {why}")
+    if not engines:
+        print("bench: no engine available", file=sys.stderr)
+        return 2
+    if BASELINE not in engines:
+        log("bench: pymunk not in the run: no ratios")
+
+    t_start = time.perf_counter()
+    runs: list[dict] = []
+    for scene in scenes:
+        # the 10,000 pile: fewer repetitions keep the whole run near 15 minutes
+        scene_reps = min(reps, 3) if scene == "pile-10000" else reps
+        for rep in range(scene_reps):
+            for engine in engines:
+                r = run_worker(scene, engine, args.timeout)
+                r.update(kind="run", rep=rep, engine_arg=engine)
+                runs.append(r)
+                ms = r.get("ms_per_step")
+                log(f"  {scene:12s} rep {rep} {engine:15s} "
+                    + (f"{ms:9.4f} ms/step" if ms is not None else f"error: {r['error']}"))
+    rows = aggregate(runs, scenes, engines)
+    growth_rows = growth(rows)
+
+    isaac_engines = [e for e in engines if e.startswith("isaac")]
+    startup_rows = []
+    if not args.no_startup and not args.quick:
+        startup_rows = startup(engines, reps=3)
+    rec = None
+    if not args.no_recording and not args.quick and isaac_engines:
+        preset = "balanced" if "isaac-balanced" in isaac_engines else isaac_engines[0][6:]
+        rec = recording(preset, reps=3, steps=300)
+        log(f"  recording: {rec}")
+    targets = check_targets(rows, growth_rows, startup_rows, isaac_engines)
+
+    meta = meta_info(reps, skipped)
+    meta["elapsed_s"] = time.perf_counter() - t_start
+    meta["scenes"], meta["engines"] = scenes, engines
+    text = markdown(meta, rows, growth_rows, startup_rows, rec, targets)
+
+    # only a full run replaces the published results; a subset goes to partial.*
+    full = not (args.quick or args.scenes or args.engines or args.reps or args.no_startup
+                or args.no_recording or args.presets != ",".join(DEFAULT_PRESETS))
+    stem = "latest" if full else "partial"
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    with open(out / f"{stem}.jsonl", "w") as f:
+        for obj in [meta, *runs, *rows, *growth_rows, *startup_rows,
+                    *([rec] if rec else []), *targets]:
+            f.write(json.dumps(obj, default=_json_default) + "\n")
+    (out / f"{stem}.md").write_text(text + "\n")
+    print(text)
+    if full and not args.no_readme and update_readme(text, ROOT / "README.md"):
+        log("bench: README.md table updated")
+    log(f"bench: {meta['elapsed_s']:.0f} s; wrote {out / (stem + '.jsonl')} and "
+        f"{out / (stem + '.md')}")
+    return 0
+
+
+def _json_default(x):
+    if isinstance(x, (np.floating, np.integer)):
+        return x.item()
+    if isinstance(x, float) and not math.isfinite(x):
+        return str(x)
+    raise TypeError(f"not JSON serialisable: {type(x).__name__}")
