@@ -173,8 +173,22 @@ def solve_contacts(rows, c_a, c_b, c_slot, c_point, c_normal, c_depth, c_previou
                     c_impulse[k] = prev_impulse[p]
                     c_tangent[k] = prev_tangent[p] if rc[k, MU] > 0.0 else 0.0
                     _apply(c_a[k], c_b[k], k, c_impulse[k], c_tangent[k], rc, inv, v)
+        # the solver's units (single points and two-point blocks, by their first row): contacts
+        # between moving bodies first, contacts with concrete bodies last, so every pass ends
+        # with the contacts that hold the world up satisfied (a blow on top of a stack no longer
+        # leaves the bottom body moving into the floor after the last pass)
+        starts = np.empty(rows, dtype=np.int64)
+        units = 0
+        for grounded in range(2):
+            k = 0
+            while k < rows:
+                touches_concrete = inv[c_a[k], 0] == 0.0 or inv[c_b[k], 0] == 0.0
+                if touches_concrete == (grounded == 1):
+                    starts[units] = k
+                    units += 1
+                k += 2 if rc[k, BLOCK] == 1.0 else 1
         for _ in range(iterations):
-            _sequential_pass(rows, c_a, c_b, rc, blk, inv, v, c_impulse, c_tangent)
+            _sequential_pass(starts, units, c_a, c_b, rc, blk, inv, v, c_impulse, c_tangent)
 
     for i in range(n):
         velocity[i, 0] = v[i, 0]
@@ -227,7 +241,7 @@ def _seed_pass(rows, c_a, c_b, c_depth, rc, inv, v, c_restitution, c_impulse, c_
 
 
 @numba.njit(cache=True)
-def _sequential_pass(rows, c_a, c_b, rc, blk, inv, v, c_impulse, c_tangent):
+def _sequential_pass(starts, units, c_a, c_b, rc, blk, inv, v, c_impulse, c_tangent):
     """One Gauss-Seidel pass of accumulated, clamped impulses.
 
     Per manifold, friction first (non-penetration matters more, so it is solved last), then the
@@ -236,8 +250,8 @@ def _sequential_pass(rows, c_a, c_b, rc, blk, inv, v, c_impulse, c_tangent):
     solver), which makes resting stacks converge in far fewer iterations. The two bodies'
     velocities are loaded once per manifold into locals and stored once.
     """
-    k = 0
-    while k < rows:
+    for u in range(units):
+        k = starts[u]
         a = c_a[k]
         b = c_b[k]
         ima = inv[a, 0]
@@ -304,7 +318,6 @@ def _sequential_pass(rows, c_a, c_b, rc, blk, inv, v, c_impulse, c_tangent):
         v[b, 0] = vbx
         v[b, 1] = vby
         v[b, 2] = wb
-        k = last + 1
 
 
 @numba.njit(cache=True, inline="always")
