@@ -68,11 +68,12 @@ MAX_CONDITION = 1000.0
 
 
 @numba.njit(cache=True)
-def solve_contacts(rows, c_a, c_b, c_slot, c_point, c_normal, c_depth, c_previous,
+def solve_contacts(rows, c_a, c_b, c_feature, c_slot, c_point, c_normal, c_depth, c_previous,
                    position, velocity, angular_velocity, inv_mass, inv_inertia, gravity_dv,
                    restitution, friction, restitution_rule, friction_rule, restitution_threshold,
                    friction_on, seed_solver, iterations, warm_starting, h,
-                   prev_impulse, prev_tangent, c_impulse, c_tangent, c_restitution):
+                   prev_impulse, prev_tangent, c_impulse, c_tangent, c_restitution,
+                   c_push_a, c_push_b):
     """Resolve every contact row; writes the impulses applied (N s) and the restitution used.
 
     gravity_dv: (2,) velocity (m/s) gravity added to every moving body just before this solve
@@ -80,6 +81,13 @@ def solve_contacts(rows, c_a, c_b, c_slot, c_point, c_normal, c_depth, c_previou
     velocity the bodies *arrived* with, without it: a resting body (arrived at 0) does not bounce
     off the gravity of its own step, and a falling body bounces back with the speed it hit with;
     reflecting the gravity increment too gained about 0.4 % of the energy per bounce.
+    A speculative contact that meets within the step (gap g closed at speed u = -vn0, which
+    includes this step's gravity since the impact comes after it) leaves with the bounce
+    velocity e u and is moved back by (1 + e) g, shared by inverse mass: it ends the step e times
+    as far from the surface as it would have sunk through it, the reflection at the surface, not
+    in the air g above it. That displacement is added to the pair's push_a / push_b. (With
+    semi-implicit Euler this keeps an e = 1 bounce's energy within 0.5 % over 60 s; reflecting
+    the arrival velocity at the mirrored position lost 23 %.)
     Velocities are worked on as a packed copy (vx, vy, w) per body and written back at the end.
     """
     n = velocity.shape[0]
@@ -92,6 +100,7 @@ def solve_contacts(rows, c_a, c_b, c_slot, c_point, c_normal, c_depth, c_previou
         inv[i, 0] = inv_mass[i]
         inv[i, 1] = inv_inertia[i]
     rc = np.empty((rows, COLUMNS))
+    bounce_back = np.zeros(rows)  # (1 + e u_b / u) g of speculative rows that bounce (m)
     for k in range(rows):
         a = c_a[k]
         b = c_b[k]
@@ -140,7 +149,10 @@ def solve_contacts(rows, c_a, c_b, c_slot, c_point, c_normal, c_depth, c_previou
         if gap <= 0.0:
             rc[k, TARGET] = -e * arrived
         elif hits and e > 0.0:
-            rc[k, TARGET] = -e * arrived  # bounces now (>= 0 > -gap / h), up to gap early
+            # it meets within this step, after this step's gravity: bounce with -e vn0 and
+            # move back by (1 + e) g, to where the reflection at the surface puts it
+            rc[k, TARGET] = -e * vn0
+            bounce_back[k] = (1.0 + e) * gap
         else:
             rc[k, TARGET] = -gap / h
         c_impulse[k] = 0.0
@@ -194,6 +206,50 @@ def solve_contacts(rows, c_a, c_b, c_slot, c_point, c_normal, c_depth, c_previou
         velocity[i, 0] = v[i, 0]
         velocity[i, 1] = v[i, 1]
         angular_velocity[i] = v[i, 2]
+    _bounce_back(rows, c_a, c_b, c_feature, c_slot, c_point, c_normal, bounce_back, inv,
+                 position, c_push_a, c_push_b)
+
+
+@numba.njit(cache=True)
+def _bounce_back(rows, c_a, c_b, c_feature, c_slot, c_point, c_normal, bounce_back, inv,
+                 position, c_push_a, c_push_b):
+    """Move each pair whose speculative contact bounced by its smallest bounce-back distance
+    along the normal (a towards b, shared by inverse mass), recorded on its slot-0 row."""
+    k = 0
+    while k < rows:
+        last = k
+        while last + 1 < rows and c_slot[last + 1] != 0:
+            last += 1
+        d = 0.0
+        for q in range(k, last + 1):
+            if bounce_back[q] > 0.0 and (d == 0.0 or bounce_back[q] < d):
+                d = bounce_back[q]
+        a = c_a[k]
+        b = c_b[k]
+        w = inv[a, 0] + inv[b, 0]
+        if d > 0.0 and w > 0.0:
+            nx = c_normal[k, 0]
+            ny = c_normal[k, 1]
+            dax = nx * d * inv[a, 0] / w
+            day = ny * d * inv[a, 0] / w
+            dbx = -nx * d * inv[b, 0] / w
+            dby = -ny * d * inv[b, 0] / w
+            position[a, 0] += dax
+            position[a, 1] += day
+            position[b, 0] += dbx
+            position[b, 1] += dby
+            c_push_a[k, 0] += dax
+            c_push_a[k, 1] += day
+            c_push_b[k, 0] += dbx
+            c_push_b[k, 1] += dby
+            for q in range(k, last + 1):  # the points move with their incident body
+                if c_feature[q] // 4096 == 0:
+                    c_point[q, 0] += dbx
+                    c_point[q, 1] += dby
+                else:
+                    c_point[q, 0] += dax
+                    c_point[q, 1] += day
+        k = last + 1
 
 
 @numba.njit(cache=True, inline="always")
