@@ -1,0 +1,220 @@
+"""`isaac tradeoff`: the grid, the analytic references, the comparison and the command."""
+
+from __future__ import annotations
+
+import csv
+import math
+from dataclasses import replace
+
+import numpy as np
+import pytest
+from physics_helpers import box, scene
+
+from isaac import tradeoff
+from isaac.cli import main
+from isaac.scene import PRESETS, load_scene
+from isaac.simulation import Simulation
+from isaac.tradeoff import (
+    GridPoint,
+    TradeoffError,
+    analytic_model,
+    analytic_trajectory,
+    measure,
+    parse_grid,
+    sample_times,
+    simulate,
+)
+
+G = 9.81
+
+
+# --- grid -----------------------------------------------------------------------------------
+
+def test_default_grid_is_the_presets_times_three_dt_values():
+    grid = parse_grid(None, 0.01)
+    assert [(p.label, p.dt) for p in grid] == [
+        (preset, dt) for preset in ("seed", "fast", "balanced", "accurate")
+        for dt in (0.02, 0.01, 0.005)]
+
+
+def test_grid_axes_multiply_and_read_like_a_scene():
+    grid = parse_grid(["preset=fast,balanced", "iterations=4,20;dt=1/60,x2"], 0.01)
+    assert len(grid) == 2 * 2 * 2
+    assert grid[0].overrides == (("preset", "fast"), ("iterations", 4))
+    assert [p.dt for p in grid[:2]] == [1 / 60, 0.02]
+    assert grid[0].label == "fast iterations=4"
+
+
+@pytest.mark.parametrize("spec, message", [
+    ("preset=quick", "unknown preset 'quick'"),
+    ("substeps=0", "out of range"),
+    ("ccd=maybe", "ccd"),
+    ("dt=0", "out of range"),
+    ("dt=abc", "cannot read 'abc'"),
+    ("colour=red", "unknown axis 'colour'"),
+    ("iterations", "expected KEY=V1,V2"),
+])
+def test_bad_grid_is_refused_with_a_clear_message(spec, message):
+    with pytest.raises(TradeoffError, match=message):
+        parse_grid([spec], 0.01)
+
+
+def test_grid_point_applies_the_preset_and_keeps_the_scene_physics():
+    base = load_scene("scenes/pile.yaml").world
+    world = GridPoint("fast", 0.005, (("preset", "fast"),)).world(base, duration=2.0)
+    for key, value in PRESETS["fast"].items():
+        assert getattr(world, key) == value
+    assert world.friction is True and world.gravity == base.gravity  # the scene's, not preset's
+    assert world.dt == 0.005 and world.steps == 400
+
+
+# --- analytic references ----------------------------------------------------------------------
+
+def test_shipped_scenes_are_classified():
+    assert analytic_model(load_scene("scenes/bounce.yaml")) == "drop"
+    assert analytic_model(load_scene("scenes/head_on.yaml")) == "head_on"
+    assert analytic_model(load_scene("scenes/off_centre.yaml")) is None  # off-centre: spins
+    assert analytic_model(load_scene("scenes/pyramid.yaml")) is None
+
+
+def test_analytic_drop_lands_and_bounces_at_the_closed_form_times():
+    sc = load_scene("scenes/bounce.yaml")  # bottom at 4.5 m, e = 0.8, threshold 1 m/s
+    t_land = math.sqrt(2 * 4.5 / G)
+    v_land = G * t_land
+    times = np.array([0.0, t_land, t_land + 0.8 * v_land / G])
+    traj = analytic_trajectory(sc, times)
+    y, v = traj.position[:, 1, 1], traj.velocity[:, 1, 1]
+    assert y[0] == 5.0 and y[1] == pytest.approx(0.5, abs=1e-12)
+    # the top of the first bounce: rises (0.8 v)^2 / 2g, velocity zero
+    assert y[2] == pytest.approx(0.5 + (0.8 * v_land) ** 2 / (2 * G), rel=1e-12)
+    assert v[2] == pytest.approx(0.0, abs=1e-12)
+
+
+def test_analytic_drop_comes_to_rest_below_the_restitution_threshold():
+    sc = load_scene("scenes/bounce.yaml")
+    traj = analytic_trajectory(sc, np.array([20.0]))
+    assert traj.position[0, 1, 1] == pytest.approx(0.5) and traj.velocity[0, 1, 1] == 0.0
+
+
+def test_analytic_head_on_exchanges_velocities_and_keeps_momentum():
+    sc = load_scene("scenes/head_on.yaml")  # equal boxes, e = 1, 3 m/s, contact at t = 1 s
+    traj = analytic_trajectory(sc, np.array([0.5, 1.5]))
+    assert traj.velocity[0, :, 0].tolist() == [3.0, 0.0]
+    assert traj.velocity[1, :, 0].tolist() == [0.0, 3.0]
+    assert traj.position[1, 1, 0] == pytest.approx(2.0 + 3.0 * 0.5, abs=1e-12)  # hit at 1 s
+    assert traj.position[1, 0, 0] == pytest.approx(-2.0 + 3.0 * 1.0, abs=1e-12)  # stopped
+
+
+def test_analytic_ballistic_is_the_parabola():
+    sc = scene(box("ball", velocity=(1.0, 2.0), angular_velocity=0.5), gravity=(0.0, -G))
+    assert analytic_model(sc) == "ballistic"
+    traj = analytic_trajectory(sc, np.array([2.0]))
+    assert traj.position[0, 0].tolist() == pytest.approx([2.0, 4.0 - 0.5 * G * 4.0])
+    assert traj.angle[0, 0] == pytest.approx(1.0)
+
+
+def test_declared_model_that_does_not_fit_is_refused():
+    sc = replace(load_scene("scenes/pyramid.yaml"), analytic={"model": "drop"})
+    with pytest.raises(TradeoffError, match="declares analytic model 'drop'"):
+        analytic_model(sc)
+
+
+# --- runs and comparisons ---------------------------------------------------------------------
+
+def test_samples_are_the_states_at_common_times():
+    sc = load_scene("scenes/bounce.yaml")
+    sc = replace(sc, world=replace(sc.world, steps=60))
+    times = sample_times(0.5, 1 / 60)  # every second step of 1/120 s
+    traj = simulate(sc, times)
+    sim = Simulation(sc)
+    records = [sim.record()] + list(sim.run(60))
+    for k, t in enumerate(times):
+        assert np.array_equal(traj.position[k], records[round(t * 120)].position)
+
+
+def test_samples_between_steps_are_interpolated():
+    sc = scene(box("ball", velocity=(1.0, 0.0)), gravity=(0.0, 0.0), dt=0.01, steps=10)
+    traj = simulate(sc, np.array([0.0, 0.015, 0.1]))
+    assert traj.position[:, 0, 0] == pytest.approx([0.0, 0.015, 0.1], abs=1e-15)
+
+
+def test_tunneling_through_concrete_is_detected():
+    def shot(ccd):
+        return scene(box("wall", 0.05, 4.0, concrete=True),
+                     box("bullet", 0.1, 0.1, position=(-0.5, 0.0), velocity=(200.0, 0.0)),
+                     preset="balanced", ccd=ccd, gravity=(0.0, 0.0), dt=1 / 60, steps=10)
+    times = sample_times(10 / 60, 1 / 60)
+    assert simulate(shot("off"), times).tunneled == ["bullet"]
+    assert simulate(shot("speculative"), times).tunneled == []
+
+
+def test_resting_body_is_not_counted_as_tunneling():
+    sc = load_scene("scenes/bounce.yaml")
+    assert simulate(sc, sample_times(5.0, 0.1)).tunneled == []
+
+
+def test_pareto_front_keeps_only_undominated_points():
+    pts = [(1.0, 5.0), (2.0, 2.0), (3.0, 3.0), (4.0, 1.0), (math.nan, 0.1)]
+    assert tradeoff._pareto(pts) == [True, True, False, True, False]
+
+
+def test_measure_bounce_error_shrinks_with_dt_and_reference_row_is_exact():
+    sc = load_scene("scenes/bounce.yaml")
+    grid = parse_grid(["preset=balanced", "dt=1/60,1/120,1/240"], sc.world.dt)
+    result = measure(sc, grid, reference="analytic", duration=2.0, repeats=1,
+                     min_seconds=0.0)
+    assert result.reference == "analytic (drop)"
+    assert result.reference_row["rms_error_m"] == 0.0
+    errors = [r["rms_error_m"] for r in result.rows]
+    assert errors[0] > errors[1] > errors[2] > 0.0
+    for row in result.rows:
+        assert row["ms_per_step"] > 0.0 and row["steps_per_s"] == pytest.approx(
+            1e3 / row["ms_per_step"])
+        assert row["ms_per_sim_s"] == pytest.approx(row["ms_per_step"] / row["dt"])
+        assert row["tunneled"] == 0 and row["diverged"] == ""
+
+
+def test_measure_against_accurate_reference_on_a_tiny_scene():
+    sc = scene(box("ground", 10.0, 1.0, position=(0.0, -0.5), concrete=True),
+               box("box", position=(0.0, 1.0), restitution=0.5), preset="balanced",
+               gravity=(0.0, -G), dt=1 / 60, steps=60)
+    grid = parse_grid(["preset=seed,accurate", "dt=1/60"], sc.world.dt)
+    result = measure(sc, grid, repeats=1, min_seconds=0.0)
+    assert result.reference.startswith("accurate, dt=")
+    assert result.reference_row["dt"] == pytest.approx(1 / 480)
+    seed, accurate = result.rows
+    assert accurate["rms_error_m"] < seed["rms_error_m"]
+    assert accurate["max_penetration_m"] < seed["max_penetration_m"]
+
+
+# --- the command ------------------------------------------------------------------------------
+
+def test_command_writes_table_csv_and_plot(tmp_path, capsys):
+    csv_path, png_path = tmp_path / "out.csv", tmp_path / "out.png"
+    status = main(["tradeoff", "scenes/bounce.yaml", "--grid", "preset=fast,balanced",
+                   "--grid", "dt=1/60,1/120", "--duration", "1", "--repeats", "1",
+                   "--min-time", "0", "--quiet",
+                   "--csv", str(csv_path), "--png", str(png_path)])
+    assert status == 0
+    out = capsys.readouterr().out
+    assert "reference: analytic (drop)" in out and "ms/step" in out and "RMS err m" in out
+    with open(csv_path) as f:
+        rows = list(csv.DictReader(f))
+    assert [r["setting"] for r in rows] == ["analytic", "fast", "fast", "balanced", "balanced"]
+    assert all(float(r["rms_error_m"]) >= 0.0 for r in rows)
+    assert png_path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert png_path.stat().st_size < 200_000
+
+
+def test_command_turns_a_bad_grid_into_one_line(capsys):
+    status = main(["tradeoff", "scenes/bounce.yaml", "--grid", "preset=quick", "--quiet"])
+    assert status == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "unknown preset 'quick'" in err[0]
+
+
+def test_command_refuses_analytic_reference_for_a_pile(capsys):
+    status = main(["tradeoff", "scenes/pyramid.yaml", "--reference", "analytic", "--quiet",
+                   "--duration", "0.1"])
+    assert status == 2
+    assert "no closed form known" in capsys.readouterr().err
