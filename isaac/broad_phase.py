@@ -14,7 +14,7 @@ import numba
 import numpy as np
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def find_pairs(position, radius, aabb, expand, movable, exists, pair_a, pair_b):
     """Write candidate pairs (a < b, sorted by (a, b)) into pair_a / pair_b.
 
@@ -89,7 +89,7 @@ def find_pairs(position, radius, aabb, expand, movable, exists, pair_a, pair_b):
     return count
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _sort_pairs(pair_a, pair_b, count, n):
     """Sort pairs by (a, b): counting sort by a, then insertion sort of each a's few b's."""
     per = np.zeros(n + 1, dtype=np.int64)
@@ -118,7 +118,7 @@ def _sort_pairs(pair_a, pair_b, count, n):
             pair_b[k] = sorted_b[k]
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def speculative_reach(velocity, angular_velocity, radius, look_ahead, extra, expand):
     """How far (m) each body can travel in `look_ahead` seconds: h (|v| + |w| r) + extra."""
     for i in range(velocity.shape[0]):

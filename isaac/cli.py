@@ -34,6 +34,9 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
+    from isaac.tuning import reuse_large_buffers
+
+    reuse_large_buffers()
     parser = build_parser()
     args = parser.parse_args(argv)
     try:

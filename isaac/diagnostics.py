@@ -28,7 +28,7 @@ class Summary:
     angular_momentum: float
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _sums(mass, inertia, concrete, exists, position, velocity, angular_velocity, gx, gy):
     ke = 0.0
     pe = 0.0

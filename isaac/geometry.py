@@ -8,7 +8,7 @@ import numba
 import numpy as np
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def transform(position, angle, exists, vertices_local, normals_local, vertex_count,
               vertices, normals, aabb):
     """Fill world vertices (n, V, 2), world edge normals (n, V, 2) and AABBs (n, 4) in place.

@@ -41,7 +41,7 @@ RULE_CODES = {"max": RULE_MAX, "min": RULE_MIN, "mean": RULE_MEAN, "product": RU
               "sqrt": RULE_SQRT}
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def combine(rule, x, y):
     """Mix two bodies' coefficients (restitution or friction) by a pair rule."""
     if rule == RULE_MAX:
@@ -67,7 +67,7 @@ K12, NM11, NM12, NM22 = range(4)
 MAX_CONDITION = 1000.0
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def solve_contacts(rows, c_a, c_b, c_feature, c_slot, c_point, c_normal, c_depth, c_previous,
                    position, velocity, angular_velocity, inv_mass, inv_inertia, gravity_dv,
                    restitution, friction, restitution_rule, friction_rule, restitution_threshold,
@@ -210,7 +210,7 @@ def solve_contacts(rows, c_a, c_b, c_feature, c_slot, c_point, c_normal, c_depth
                  position, c_push_a, c_push_b)
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _bounce_back(rows, c_a, c_b, c_feature, c_slot, c_point, c_normal, bounce_back, inv,
                  position, c_push_a, c_push_b):
     """Move each pair whose speculative contact bounced by its smallest bounce-back distance
@@ -252,7 +252,7 @@ def _bounce_back(rows, c_a, c_b, c_feature, c_slot, c_point, c_normal, bounce_ba
         k = last + 1
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(cache=True, nogil=True, inline="always")
 def _apply(a, b, k, jn, jt, rc, inv, v):
     """Apply normal impulse jn and tangent impulse jt (N s) of row k: -P to a, +P to b."""
     nx = rc[k, NX]
@@ -267,7 +267,7 @@ def _apply(a, b, k, jn, jt, rc, inv, v):
     v[b, 2] += (jn * rc[k, RNB] + jt * rc[k, RTB]) * inv[b, 1]
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _seed_pass(rows, c_a, c_b, c_depth, rc, inv, v, c_restitution, c_impulse, c_tangent):
     """The seed: one pass, each contact's impulse from the velocities the previous ones left."""
     for k in range(rows):
@@ -296,7 +296,7 @@ def _seed_pass(rows, c_a, c_b, c_depth, rc, inv, v, c_restitution, c_impulse, c_
             c_tangent[k] = jt
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _sequential_pass(starts, units, c_a, c_b, rc, blk, inv, v, c_impulse, c_tangent):
     """One Gauss-Seidel pass of accumulated, clamped impulses.
 
@@ -376,7 +376,7 @@ def _sequential_pass(starts, units, c_a, c_b, rc, blk, inv, v, c_impulse, c_tang
         v[b, 2] = wb
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(cache=True, nogil=True, inline="always")
 def _block_normal(k, rc, blk, c_impulse, vax, vay, wa, vbx, vby, wb):
     """Both normal impulses of a two-point manifold (rows k, k + 1) as one 2x2 LCP.
 

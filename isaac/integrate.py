@@ -23,7 +23,7 @@ PI = np.pi
 TWO_PI = 2.0 * np.pi
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def add_gravity(velocity, movable, exists, gx, gy, h):
     """v += g h (m/s) for every existing movable body."""
     for i in range(velocity.shape[0]):
@@ -32,7 +32,7 @@ def add_gravity(velocity, movable, exists, gx, gy, h):
             velocity[i, 1] += gy * h
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def advance_positions(position, angle, velocity, angular_velocity, movable, exists, h):
     """x += v h (m); angle += w h (rad), wrapped into [-pi, pi]."""
     for i in range(position.shape[0]):
@@ -47,7 +47,7 @@ def advance_positions(position, angle, velocity, angular_velocity, movable, exis
             angle[i] = a
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def first_diverged(position, angle, velocity, angular_velocity, exists, position_limit,
                    speed_limit, angle_limit):
     """(body index, field code) of the first existing body whose state is NaN, infinite or

@@ -41,7 +41,7 @@ HYSTERESIS_ABSOLUTE = 1e-4
 # body: a view costs reference counting on every pair, which was half the narrow phase's time.
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(cache=True, nogil=True, inline="always")
 def face_separation(vertices, normals, r, edge, i, count_i):
     """Separation (m) of body i from face `edge` of body r: min over i's vertices."""
     nx = normals[r, edge, 0]
@@ -56,7 +56,7 @@ def face_separation(vertices, normals, r, edge, i, count_i):
     return best
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(cache=True, nogil=True, inline="always")
 def max_separation(vertices, normals, r, count_r, i, count_i):
     """Largest face separation of body r against body i, and its face index.
 
@@ -74,7 +74,7 @@ def max_separation(vertices, normals, r, count_r, i, count_i):
     return best, best_edge
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(cache=True, nogil=True, inline="always")
 def _previous_row(first, prev_key, prev_feature, prev_slot, feature, slot):
     """The previous step's row of this pair (starting at `first`) with the same feature and
     slot, or -1: the same contact point, whose impulse warm-starts this one."""
@@ -88,7 +88,7 @@ def _previous_row(first, prev_key, prev_feature, prev_slot, feature, slot):
     return -1
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(cache=True, nogil=True, inline="always")
 def _emit(row, a, b, feature, slot, px, py, nx, ny, depth, pair_depth, previous,
           c_a, c_b, c_feature, c_slot, c_point, c_normal, c_depth, c_pair_depth, c_previous):
     """Write one contact row."""
@@ -105,7 +105,7 @@ def _emit(row, a, b, feature, slot, px, py, nx, ny, depth, pair_depth, previous,
     c_previous[row] = previous
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def collide_pairs(pair_a, pair_b, n_pairs, vertices, normals, vertex_count, radius,
                   velocity, angular_velocity, margin_time, margin_extra, two_points, hysteresis,
                   prev_key, prev_feature, prev_slot,

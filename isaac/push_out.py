@@ -23,7 +23,7 @@ NONE = 2
 SLOP_SHARE = 0.05
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def push_out(rows, c_a, c_b, c_feature, c_slot, c_point, c_normal, c_pair_depth, inv_mass,
              thickness, position, mode, slop, correction, iterations, c_push_a, c_push_b):
     """Push each pair apart (on its slot-0 row) in `iterations` passes; positions in place.

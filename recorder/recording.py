@@ -23,6 +23,7 @@ import numpy as np
 from isaac import diagnostics
 from isaac.errors import IsaacError, LogError, SimulationError
 from isaac.records import StepRecord
+from isaac.tuning import reuse_large_buffers
 
 _CONTACT_FLOATS = ("point", "normal", "depth", "push_a", "push_b", "impulse", "tangent_impulse",
                    "restitution")
@@ -102,6 +103,8 @@ class Recorder:
                  scene_text: str | None = None, compression: str = "none",
                  flush_every: int = 100, foxglove: bool = False,
                  impulse_scale: float | None = None) -> None:
+        # a step's messages are 100 kB and more: keep such buffers in the heap (isaac.tuning)
+        reuse_large_buffers()
         self.sim = sim
         self.model = sim.model
         self.scene = sim.scene
@@ -132,7 +135,7 @@ class Recorder:
                         impulse_scale=auto_impulse if impulse_scale is None else impulse_scale)
                 self.mcap = McapLogWriter(mcap_path, self.model, self.scene, scene_text,
                                           flush_every=flush_every, compression=compression,
-                                          foxglove=scene_encoder)
+                                          foxglove=scene_encoder, background=True)
             if rrd_path is not None:
                 from recorder.rerun_writer import RerunLogWriter
                 self.rerun = RerunLogWriter(rrd_path, self.model, self.scene,
