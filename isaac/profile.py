@@ -16,6 +16,7 @@ STAGES = {
     "speculative_reach": "broad phase",
     "find_pairs": "broad phase",
     "collide_pairs": "narrow phase",
+    "match_previous": "narrow phase",
     "push_out": "push-out",
     "add_gravity": "integration",
     "solve_contacts": "impulses",

@@ -27,7 +27,7 @@ from isaac.broad_phase import find_pairs, speculative_reach
 from isaac.geometry import transform
 from isaac.impulse import RULE_CODES, solve_contacts
 from isaac.integrate import add_gravity, advance_positions
-from isaac.narrow_phase import collide_pairs
+from isaac.narrow_phase import collide_pairs, match_previous
 from isaac.push_out import FULL, NONE, PARTIAL, push_out
 from isaac.records import Contacts
 from isaac.scene import WorldSettings
@@ -172,13 +172,16 @@ def detect(model: Model, cfg: StepSettings, state: State, work: Workspace,
         if pairs <= work.pair_a.shape[0]:
             break
         work.grow(pairs)
-    # 3. narrow phase
-    return collide_pairs(work.pair_a, work.pair_b, pairs, work.vertices, work.normals,
+    # 3. narrow phase (and which previous contact each row continues, for warm starting)
+    rows = collide_pairs(work.pair_a, work.pair_b, pairs, work.vertices, work.normals,
                          model.vertex_count, model.radius, state.velocity,
                          state.angular_velocity, cfg.look_ahead, cfg.gravity_reach,
                          cfg.two_points, cfg.hysteresis, cache.key, cache.feature, cache.slot,
                          work.a, work.b, work.feature, work.slot, work.point, work.normal,
                          work.depth, work.pair_depth, work.previous)
+    match_previous(rows, work.a, work.b, work.feature, work.slot, model.n_bodies, cache.key,
+                   cache.feature, cache.slot, work.previous)
+    return rows
 
 
 def substep(model: Model, cfg: StepSettings, state: State, work: Workspace,
