@@ -25,7 +25,7 @@ PRESETS: dict[str, dict[str, object]] = {
                  warm_starting=False, contact_points=1, position_correction="full",
                  position_iterations=1, restitution_threshold=0.0, ccd="off",
                  axis_hysteresis=False),
-    "fast": dict(integrator="semi_implicit", substeps=1, solver="sequential", iterations=4,
+    "fast": dict(integrator="semi_implicit", substeps=1, solver="sequential", iterations=6,
                  warm_starting=True, contact_points=2, position_correction="partial",
                  position_iterations=1, restitution_threshold=0.5, ccd="off",
                  axis_hysteresis=True),
