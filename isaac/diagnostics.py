@@ -78,6 +78,27 @@ def angular_momentum(model, record: StepRecord) -> float:
     return summary(model, record, (0.0, 0.0)).angular_momentum
 
 
+@numba.njit(cache=True, nogil=True)
+def _finite(a):
+    flat = a.ravel()
+    for i in range(flat.shape[0]):
+        if not np.isfinite(flat[i]):
+            return False
+    return True
+
+
+def all_finite(record: StepRecord) -> bool:
+    """Whether every float of the record (state and contacts) is finite; one compiled pass per
+    array, for the recorder's never-write-NaN check on every step."""
+    c = record.contacts
+    for arr in (record.position, record.angle, record.velocity, record.angular_velocity,
+                c.point, c.normal, c.depth, c.push_a, c.push_b, c.impulse, c.tangent_impulse,
+                c.restitution):
+        if arr.size and not _finite(arr):
+            return False
+    return True
+
+
 def state_hash(record: StepRecord) -> str:
     """sha256 (hex) of the exact bits of the body state after the step.
 

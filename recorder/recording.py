@@ -66,6 +66,8 @@ def _first_bad_row(arr: np.ndarray) -> int | None:
 
 def check_finite(names, record: StepRecord) -> None:
     """Raise `SimulationError` (naming step and body) if the record holds a NaN or infinity."""
+    if diagnostics.all_finite(record):
+        return
     for field in _BODY_FLOATS:
         k = _first_bad_row(getattr(record, field))
         if k is not None:
