@@ -1,0 +1,79 @@
+"""The MCAP log decodes in Foxglove's TypeScript stack (@mcap/core + protobufjs), bit for bit.
+
+Needs node and npm (on this project's machines); the two npm packages are installed once into
+.venv/js-mcap-check. Without node, or with no npm registry to install from, the test is skipped
+with the reason.
+"""
+
+import json
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from recorder.reader import LogReader
+
+REPO = Path(__file__).resolve().parents[2]
+JS = Path(__file__).resolve().parent / "js"
+MODULES = REPO / ".venv" / "js-mcap-check"
+
+SCENE = """
+name: foxglove_check
+world: {gravity: [0.0, -9.81], dt: 0.01, steps: 60}
+bodies:
+  - {name: ground, shape: {box: [10.0, 1.0]}, position: [0.0, -0.5], concrete: true}
+  - {name: box, shape: {box: [1.0, 1.0]}, position: [0.0, 1.0], angular_velocity: 0.3}
+  - {name: hex, shape: {regular: {sides: 6, radius: 0.4}}, position: [0.3, 2.5],
+     velocity: [0.1, 0.0], enters_at: 0.2}
+"""
+
+
+def _node_modules() -> Path:
+    node, npm = shutil.which("node"), shutil.which("npm")
+    if node is None or npm is None:
+        pytest.skip("node/npm not installed")
+    if not (MODULES / "node_modules" / "@mcap" / "core").exists():
+        MODULES.mkdir(parents=True, exist_ok=True)
+        shutil.copy(JS / "package.json", MODULES / "package.json")
+        try:
+            done = subprocess.run([npm, "install", "--no-audit", "--no-fund", "--silent"],
+                                  cwd=MODULES, capture_output=True, text=True, timeout=300)
+        except subprocess.TimeoutExpired:
+            pytest.skip("npm install timed out (no registry?)")
+        if done.returncode != 0:
+            pytest.skip(f"npm install failed: {done.stderr.strip()[:200]}")
+    shutil.copy(JS / "decode_mcap.mjs", MODULES / "decode_mcap.mjs")
+    return MODULES
+
+
+def test_every_channel_decodes_with_foxglove_typescript_stack_bit_for_bit(tmp_path):
+    modules = _node_modules()
+    scene = tmp_path / "scene.yaml"
+    scene.write_text(SCENE)
+    log = tmp_path / "run.mcap"
+    run = subprocess.run([sys.executable, "-m", "isaac", "run", str(scene), "--quiet", "--mcap",
+                          str(log)], cwd=REPO, capture_output=True, text=True, timeout=300)
+    assert run.returncode == 0, run.stderr
+    node = subprocess.run([shutil.which("node"), str(modules / "decode_mcap.mjs"), str(log)],
+                          cwd=modules, capture_output=True, text=True, timeout=120)
+    assert node.returncode == 0, node.stderr
+    decoded = json.loads(node.stdout)
+
+    steps = list(LogReader(str(log)).steps())
+    assert decoded["counts"]["/bodies"] == decoded["counts"]["/contacts"] == len(steps) == 61
+    assert decoded["counts"]["/stats"] == len(steps)
+    # /world at step 0 and when the hexagon enters
+    assert decoded["counts"]["/world"] == 2
+    for which, logged in (("first", steps[0].record), ("last", steps[-1].record)):
+        js = decoded[which]
+        assert js["step"] == logged.step
+        assert np.array_equal(np.array(js["position"], dtype=np.float64),
+                              logged.position.reshape(-1))
+        assert np.array_equal(np.array(js["velocity"], dtype=np.float64),
+                              logged.velocity.reshape(-1))
+        assert np.array_equal(np.array(js["angle"], dtype=np.float64), logged.angle)
+        assert np.array_equal(np.array(js["angularVelocity"], dtype=np.float64),
+                              logged.angular_velocity)
