@@ -145,6 +145,11 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--reps", type=int, default=3)
     parser.add_argument("--steps", type=int, default=300)
     args = parser.parse_args(argv)
+    # the process-level tuning `isaac run` and the Recorder apply (isaac.tuning), applied up
+    # front so the plain runs and the recorded runs of this process share it
+    from isaac.tuning import reuse_large_buffers
+
+    reuse_large_buffers()
     os.makedirs(args.out, exist_ok=True)
     result = run(args.scene, args.preset, args.out, args.reps, args.steps)
     sys.stdout.write(json.dumps(result) + "\n")
