@@ -66,10 +66,9 @@ def _sim(case: str, preset: str) -> Simulation:
     # their size, as a user should (docs/tradeoff.md), whatever cap the engine applies itself.
     make, size = CASES[case]
     slop = min(DEFAULT_SLOP, 0.05 * size)
-    # a world of bodies below 1 cm is the 1 m world scaled down: its motions under gravity take
-    # sqrt(size / 1 m) as long, so its time step is scaled the same way (1 mm: dt = 0.53 ms).
-    # At 1/60 s a 1 mm grain falls several times its own size per step, which no discrete step
-    # can resolve.
+    # bodies below 1 cm get a time step scaled by sqrt(size / 1 cm), as motions under gravity
+    # scale (1 mm: dt = 5.3 ms): at 1/60 s a 1 mm grain falls several times its own size per
+    # step, which no discrete step can resolve.
     dt = DT * min(1.0, (size / 0.01) ** 0.5) if size < 0.01 else DT
     return Simulation(scene(*make(), preset=preset, gravity=(0.0, -9.81), dt=dt, friction=True,
                             slop=slop))
