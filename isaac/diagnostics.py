@@ -79,24 +79,23 @@ def angular_momentum(model, record: StepRecord) -> float:
 
 
 @numba.njit(cache=True, nogil=True)
-def _finite(a):
-    flat = a.ravel()
-    for i in range(flat.shape[0]):
-        if not np.isfinite(flat[i]):
-            return False
+def _finite(arrays):
+    for a in arrays:
+        for i in range(a.shape[0]):
+            if not np.isfinite(a[i]):
+                return False
     return True
 
 
 def all_finite(record: StepRecord) -> bool:
-    """Whether every float of the record (state and contacts) is finite; one compiled pass per
-    array, for the recorder's never-write-NaN check on every step."""
+    """Whether every float of the record (state and contacts) is finite: one compiled pass,
+    for the recorder's never-write-NaN check on every step."""
     c = record.contacts
-    for arr in (record.position, record.angle, record.velocity, record.angular_velocity,
-                c.point, c.normal, c.depth, c.push_a, c.push_b, c.impulse, c.tangent_impulse,
-                c.restitution):
-        if arr.size and not _finite(arr):
-            return False
-    return True
+    arrays = (record.position, record.angle, record.velocity, record.angular_velocity, c.point,
+              c.normal, c.depth, c.push_a, c.push_b, c.impulse, c.tangent_impulse,
+              c.restitution)
+    # flat float64 views (no copies for the engine's contiguous arrays): one tuple type
+    return bool(_finite(tuple(np.ravel(np.asarray(a, dtype=np.float64)) for a in arrays)))
 
 
 def state_hash(record: StepRecord) -> str:

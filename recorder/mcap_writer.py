@@ -29,6 +29,7 @@ from fractions import Fraction
 import numpy as np
 from mcap.writer import CompressionType, Writer
 
+from isaac.diagnostics import state_hash
 from isaac.errors import LogError
 from isaac.records import StepRecord
 from recorder import schema as S
@@ -264,38 +265,45 @@ class McapLogWriter:
             self._thread.start()
 
     def write(self, record: StepRecord, stats: dict) -> None:
-        """Append one step (its state, contacts and stats); ``/world`` when existence changed."""
+        """Append one step (its state, contacts and stats); ``/world`` when existence changed.
+
+        ``stats`` may leave out ``state_hash``: it is then computed here. With a writer thread,
+        the record (immutable) is handed over as it is and encoded, hashed and written there,
+        beside the next step (the engine's kernels release the GIL).
+        """
         if self._error is not None:
             raise LogError(f"writing {self.partial_path} failed: {self._error}")
-        step = record.step
-        ch = self._channel
-        messages = []
         exists = record.exists
-        if self._last_exists is None or not np.array_equal(exists, self._last_exists):
-            messages.append((ch["/world"],
-                             encode_world(self.model, step, record.time, exists)))
+        world_changed = self._last_exists is None or not np.array_equal(exists,
+                                                                         self._last_exists)
+        if world_changed:
             self._last_exists = exists.copy()
-        messages.append((ch["/bodies"], encode_bodies(record)))
-        messages.append((ch["/contacts"], encode_contacts(record)))
-        messages.append((ch["/stats"], encode_stats(step, record.time, stats)))
-        t = self.clock(step)
-        if self.foxglove is not None:
-            messages.append((ch["/foxglove/scene"], self.foxglove.encode(record, t)))
         self.steps_written += 1
-        self.last_step = step
+        self.last_step = record.step
         # first step at once (schemas and channels live in the first chunk), then every N steps
         flush = self.steps_written == 1 or self.steps_written % self.flush_every == 0
-        item = (step, t, messages, flush)
+        item = (record, stats, world_changed, flush)
         if self._queue is None:
             self._emit(item)
         else:
             self._queue.put(item)
 
     def _emit(self, item) -> None:
-        step, t, messages, flush = item
+        record, stats, world_changed, flush = item
+        step = record.step
+        if "state_hash" not in stats:
+            stats = {**stats, "state_hash": state_hash(record)}
+        ch = self._channel
+        t = self.clock(step)
         add = self._writer.add_message
-        for channel, data in messages:
-            add(channel, t, data, t, step)
+        if world_changed:
+            add(ch["/world"], t, encode_world(self.model, step, record.time, record.exists), t,
+                step)
+        add(ch["/bodies"], t, encode_bodies(record), t, step)
+        add(ch["/contacts"], t, encode_contacts(record), t, step)
+        add(ch["/stats"], t, encode_stats(step, record.time, stats), t, step)
+        if self.foxglove is not None:
+            add(ch["/foxglove/scene"], t, self.foxglove.encode(record, t), t, step)
         if flush:
             self._writer.flush()
 

@@ -30,14 +30,17 @@ _CONTACT_FLOATS = ("point", "normal", "depth", "push_a", "push_b", "impulse", "t
 _BODY_FLOATS = ("position", "angle", "velocity", "angular_velocity")
 
 
-def compute_stats(model, gravity, record: StepRecord) -> dict:
-    """The ``/stats`` values of one record (SI units; see isaac.diagnostics)."""
+def compute_stats(model, gravity, record: StepRecord, with_hash: bool = True) -> dict:
+    """The ``/stats`` values of one record (SI units; see isaac.diagnostics).
+
+    with_hash: False leaves out ``state_hash``; the MCAP writer then computes it in its thread.
+    """
     totals = diagnostics.summary(model, record, gravity)
     ke, pe = totals.kinetic_energy, totals.potential_energy
     p = totals.linear_momentum
     c = record.contacts
     n = len(c)
-    return {
+    stats = {
         "kinetic_energy": ke,
         "potential_energy": pe,
         "total_energy": ke + pe,
@@ -47,8 +50,10 @@ def compute_stats(model, gravity, record: StepRecord) -> dict:
         "contact_count": n,
         "max_depth": float(np.max(c.depth)) if n else 0.0,
         "max_impulse": float(np.max(c.impulse)) if n else 0.0,
-        "state_hash": diagnostics.state_hash(record),
     }
+    if with_hash:
+        stats["state_hash"] = diagnostics.state_hash(record)
+    return stats
 
 
 def _first_bad_row(arr: np.ndarray) -> int | None:
@@ -151,7 +156,8 @@ class Recorder:
         if self.closed:
             raise LogError("the recorder is closed")
         check_finite(self.model.names, record)
-        stats = compute_stats(self.model, self.gravity, record)
+        # only MCAP's /stats carries the state hash: its writer (thread) computes it
+        stats = compute_stats(self.model, self.gravity, record, with_hash=False)
         if self.mcap is not None:
             self.mcap.write(record, stats)
         if self.rerun is not None:

@@ -111,6 +111,7 @@ class RerunLogWriter:
         self.outline_local = local[np.arange(n)[:, None], idx] if n else np.zeros((0, 1, 2))
         self._local_complex = self.outline_local[:, :, 0] + 1j * self.outline_local[:, :, 1]
         self.concrete = np.asarray(model.concrete, dtype=bool)
+        self._not_concrete = ~self.concrete
         self._mask_key: bytes | None = None
         auto_impulse, auto_normal = default_scales(model)
         self.impulse_scale = float(impulse_scale) if impulse_scale is not None else auto_impulse
@@ -118,6 +119,7 @@ class RerunLogWriter:
         self._closed = False
         self._static_done = False
         self._last_labels_key: bytes | None = None
+        self._moving_key: bytes | None = None
         self._reset()
 
         self.rec = rr.RecordingStream(APP_ID, recording_id=f"isaac-{scene.name}")
@@ -146,14 +148,40 @@ class RerunLogWriter:
     def _reset(self) -> None:
         self._steps: list[int] = []
         self._times: list[float] = []
-        self._strips: list[np.ndarray] = []
-        self._strip_counts: list[int] = []
-        self._points: list[np.ndarray] = []
-        self._normals: list[np.ndarray] = []
-        self._impulses: list[np.ndarray] = []
-        self._contact_counts: list[int] = []
-        self._pushes: list[tuple[np.ndarray, np.ndarray]] = []
-        self._stats: dict[str, list[float]] = {k: [] for k in STAT_NAMES}
+        self._records: list[StepRecord] = []
+        self._moving: list[tuple[np.ndarray, np.ndarray]] = []
+        self._stat_dicts: list[dict] = []
+
+    def _batch_strips(self) -> tuple[np.ndarray, list[int]]:
+        """(sum k, v_max + 1, 2) float32 outlines of the buffered steps and k per step; the
+        same arithmetic as `_outlines`, over runs of steps with the same moving bodies."""
+        recs, moving = self._records, self._moving
+        out = []
+        counts = []
+        i = 0
+        while i < len(recs):
+            idx, local_c = moving[i]
+            j = i + 1
+            while j < len(recs) and moving[j][0] is idx:
+                j += 1
+            k = idx.size
+            counts.extend([k] * (j - i))
+            if k:
+                angle = np.stack([r.angle for r in recs[i:j]])[:, idx]
+                position = np.stack([r.position for r in recs[i:j]])[:, idx]
+                rot = np.empty(angle.shape, dtype=np.complex128)
+                rot.real = np.cos(angle)
+                rot.imag = np.sin(angle)
+                pos = np.empty(angle.shape, dtype=np.complex128)
+                pos.real = position[..., 0]
+                pos.imag = position[..., 1]
+                z = local_c[None, :, :] * rot[:, :, None]
+                z += pos[:, :, None]
+                out.append(z.view(np.float64).reshape((j - i) * k, -1, 2).astype(np.float32))
+            i = j
+        v_len = self.outline_local.shape[1]
+        strips = np.concatenate(out) if out else np.zeros((0, v_len, 2), dtype=np.float32)
+        return strips, counts
 
     def _outlines(self, record: StepRecord, mask: np.ndarray) -> np.ndarray:
         """(k, v_max + 1, 2) float32 world outlines of the bodies in ``mask``:
@@ -188,7 +216,7 @@ class RerunLogWriter:
                     self._outlines(record, concrete), colors=[_CONCRETE], radii=[-1.5],
                     labels=[self.names[k] for k in np.flatnonzero(concrete)]), static=True)
             self._static_done = True
-        moving = exists & ~self.concrete
+        moving = exists & self._not_concrete
         key = moving.tobytes()
         if key != self._last_labels_key:
             # labels change only when a body enters or leaves: logged then, not every step
@@ -199,30 +227,16 @@ class RerunLogWriter:
             self._last_labels_key = key
         self._steps.append(record.step)
         self._times.append(record.time)
-        strips = self._outlines(record, moving)
-        self._strips.append(strips)
-        self._strip_counts.append(strips.shape[0])
-        c = record.contacts
-        m = len(c)
-        self._contact_counts.append(m)
-        if m:
-            # float32 (what Rerun stores) right away: half the bytes to buffer and concatenate
-            point = c.point.astype(np.float32)
-            self._points.append(point)
-            self._normals.append((c.normal * self.normal_length).astype(np.float32))
-            self._impulses.append(
-                (c.normal * (c.impulse * self.impulse_scale)[:, None]).astype(np.float32))
-            # push arrows only where a push was applied (slot 0 rows of pushed pairs)
-            moved_a = np.flatnonzero(np.any(c.push_a != 0.0, axis=1))
-            moved_b = np.flatnonzero(np.any(c.push_b != 0.0, axis=1))
-            self._pushes.append((np.concatenate([point[moved_a], point[moved_b]]),
-                                 np.concatenate([c.push_a[moved_a], c.push_b[moved_b]])
-                                 .astype(np.float32)))
-        else:
-            self._pushes.append((_EMPTY2, _EMPTY2))
+        if key != self._moving_key:
+            self._moving_key = key
+            self._moving_index = np.flatnonzero(moving)
+            self._moving_local = np.ascontiguousarray(self._local_complex[self._moving_index])
+        # records are immutable: the outlines and arrows of a whole batch are computed in _send,
+        # a few numpy calls per batch instead of per step
+        self._records.append(record)
+        self._moving.append((self._moving_index, self._moving_local))
         if stats is not None:
-            for k in STAT_NAMES:
-                self._stats[k].append(float(stats[k]))
+            self._stat_dicts.append(stats)
         if len(self._steps) >= self.batch:
             self._send()
 
@@ -232,22 +246,37 @@ class RerunLogWriter:
         rec = self.rec
         times = [rr.TimeColumn("step", sequence=self._steps),
                  rr.TimeColumn("sim_time", duration=self._times)]
-        v_len = self.outline_local.shape[1]
-        strips = (np.concatenate(self._strips) if self._strips
-                  else np.zeros((0, v_len, 2)))
+        strips, strip_counts = self._batch_strips()
         rec.send_columns("world/bodies/moving", indexes=times,
                          columns=rr.LineStrips2D.columns(strips=_strips_arrow(strips)).partition(
-                             self._strip_counts))
-        counts = self._contact_counts
+                             strip_counts))
+        contacts = [r.contacts for r in self._records]
+        counts = [len(c) for c in contacts]
+        n_steps = len(counts)
         if any(counts):
-            points = np.concatenate(self._points)
-            normals = np.concatenate(self._normals)
-            impulses = np.concatenate(self._impulses)
+            live = [c for c in contacts if len(c)]
+            normal = np.concatenate([c.normal for c in live])
+            impulse = np.concatenate([c.impulse for c in live])
+            push_a = np.concatenate([c.push_a for c in live])
+            push_b = np.concatenate([c.push_b for c in live])
+            # float32 (what Rerun stores), each value as it was computed per step
+            points = np.concatenate([c.point for c in live]).astype(np.float32)
+            normals = (normal * self.normal_length).astype(np.float32)
+            impulses = (normal * (impulse * self.impulse_scale)[:, None]).astype(np.float32)
+            # push arrows only where a push was applied (slot 0 rows of pushed pairs): per step
+            # those of body a, then those of body b
+            row_step = np.repeat(np.arange(n_steps), counts)
+            moved_a = np.flatnonzero((push_a[:, 0] != 0.0) | (push_a[:, 1] != 0.0))
+            moved_b = np.flatnonzero((push_b[:, 0] != 0.0) | (push_b[:, 1] != 0.0))
+            order = np.argsort(np.concatenate([2 * row_step[moved_a], 2 * row_step[moved_b] + 1]),
+                               kind="stable")
+            push_pt = np.concatenate([points[moved_a], points[moved_b]])[order]
+            push_v = np.concatenate([push_a[moved_a], push_b[moved_b]])[order].astype(np.float32)
+            push_counts = (np.bincount(row_step[moved_a], minlength=n_steps)
+                           + np.bincount(row_step[moved_b], minlength=n_steps)).tolist()
         else:
-            points = normals = impulses = _EMPTY2
-        push_pt = np.concatenate([p for p, _ in self._pushes])
-        push_v = np.concatenate([v for _, v in self._pushes])
-        push_counts = [p.shape[0] for p, _ in self._pushes]
+            points = normals = impulses = push_pt = push_v = _EMPTY2
+            push_counts = [0] * n_steps
         rec.send_columns("world/contacts", indexes=times,
                          columns=rr.Points2D.columns(positions=points).partition(counts))
         rec.send_columns("world/normals", indexes=times,
@@ -259,10 +288,11 @@ class RerunLogWriter:
         rec.send_columns("world/push", indexes=times,
                          columns=rr.Arrows2D.columns(origins=push_pt, vectors=push_v)
                          .partition(push_counts))
-        if self._stats[STAT_NAMES[0]]:
+        if self._stat_dicts:
             for k in STAT_NAMES:
+                values = np.array([float(d[k]) for d in self._stat_dicts])
                 rec.send_columns(f"stats/{k}", indexes=times,
-                                 columns=rr.Scalars.columns(scalars=np.asarray(self._stats[k])))
+                                 columns=rr.Scalars.columns(scalars=values))
         self._reset()
 
     def close(self, *, complete: bool = True, stopped_at: int | None = None,
