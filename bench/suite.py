@@ -341,6 +341,9 @@ def markdown(meta, rows, growth_rows, startup_rows, recs, targets) -> str:
                 loop_text = ""
                 if loop:
                     loop_text = f"; its own loop rate {loop:.0f} steps/s"
+                    if rp.get("time_ratio_to_recorded_run"):
+                        loop_text += (f", {rp['time_ratio_to_recorded_run']:.2f}x the ms/step "
+                                      "of the run that wrote the log (target <= 1.2)")
                     if rp.get("time_ratio_to_run"):
                         loop_text += f", {rp['time_ratio_to_run']:.2f}x the plain run's ms/step"
                 verdict = ("identical" if rp["identical"]
