@@ -75,8 +75,8 @@ def max_separation(vertices, normals, r, count_r, i, count_i):
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
-def _emit(row, a, b, feature, slot, px, py, nx, ny, depth, pair_depth, previous,
-          c_a, c_b, c_feature, c_slot, c_point, c_normal, c_depth, c_pair_depth, c_previous):
+def _emit(row, a, b, feature, slot, px, py, nx, ny, depth, pair_depth,
+          c_a, c_b, c_feature, c_slot, c_point, c_normal, c_depth, c_pair_depth):
     """Write one contact row."""
     c_a[row] = a
     c_b[row] = b
@@ -88,15 +88,13 @@ def _emit(row, a, b, feature, slot, px, py, nx, ny, depth, pair_depth, previous,
     c_normal[row, 1] = ny
     c_depth[row] = depth
     c_pair_depth[row] = pair_depth
-    c_previous[row] = previous
 
 
 @numba.njit(cache=True, nogil=True)
 def collide_pairs(pair_a, pair_b, n_pairs, vertices, normals, vertex_count, radius,
                   velocity, angular_velocity, margin_time, margin_extra, two_points, hysteresis,
-                  prev_key, prev_feature, prev_slot,
-                  c_a, c_b, c_feature, c_slot, c_point, c_normal, c_depth, c_pair_depth,
-                  c_previous):
+                  prev_key, prev_feature,
+                  c_a, c_b, c_feature, c_slot, c_point, c_normal, c_depth, c_pair_depth):
     """Contacts of every candidate pair, written row by row in pair order; returns the row count.
 
     margin_time: time (s) over which speculative contacts look ahead (0 turns ccd off);
@@ -105,7 +103,7 @@ def collide_pairs(pair_a, pair_b, n_pairs, vertices, normals, vertex_count, radi
     Rows: c_depth is the penetration of that point (m; negative = gap of a speculative point) and
     c_pair_depth the pair's MTD depth, used by the push-out. prev_key (the previous rows'
     a * n + b) is ascending, like the pairs, so one forward walk finds every pair's previous
-    rows (for axis hysteresis); match_previous fills c_previous afterwards.
+    rows (for axis hysteresis); match_previous pairs rows for warm starting afterwards.
     """
     n = vertex_count.shape[0]
     n_prev = prev_key.shape[0]
@@ -149,16 +147,11 @@ def collide_pairs(pair_a, pair_b, n_pairs, vertices, normals, vertex_count, radi
                 f = prev_feature[prev]
                 side = f // 4096
                 edge = (f // 64) % 64
-                if side == 0 and edge < ca:
-                    s_prev = face_separation(vertices, normals, a, edge, b, cb)
+                owner, other, other_count = (a, b, cb) if side == 0 else (b, a, ca)
+                if edge < vertex_count[owner]:
+                    s_prev = face_separation(vertices, normals, owner, edge, other, other_count)
                     if s_prev >= best - tol:
-                        ref_side = 0
-                        ref_edge = edge
-                        ref_sep = s_prev
-                elif side == 1 and edge < cb:
-                    s_prev = face_separation(vertices, normals, b, edge, a, ca)
-                    if s_prev >= best - tol:
-                        ref_side = 1
+                        ref_side = side
                         ref_edge = edge
                         ref_sep = s_prev
         elif sep_b > sep_a:
@@ -261,16 +254,12 @@ def collide_pairs(pair_a, pair_b, n_pairs, vertices, normals, vertex_count, radi
             slot = 0
             if keep1:
                 _emit(rows, a, b, feature, 0, p1x, p1y, outx, outy, -s1, pair_depth,
-                      -1,
-                      c_a, c_b, c_feature, c_slot, c_point, c_normal, c_depth, c_pair_depth,
-                      c_previous)
+                      c_a, c_b, c_feature, c_slot, c_point, c_normal, c_depth, c_pair_depth)
                 rows += 1
                 slot = 1
             if keep2:
                 _emit(rows, a, b, feature, slot, p2x, p2y, outx, outy, -s2, pair_depth,
-                      -1,
-                      c_a, c_b, c_feature, c_slot, c_point, c_normal, c_depth, c_pair_depth,
-                      c_previous)
+                      c_a, c_b, c_feature, c_slot, c_point, c_normal, c_depth, c_pair_depth)
                 rows += 1
         else:
             if keep1 and keep2:
@@ -292,9 +281,7 @@ def collide_pairs(pair_a, pair_b, n_pairs, vertices, normals, vertex_count, radi
                 px = p2x
                 py = p2y
             _emit(rows, a, b, feature, 0, px, py, outx, outy, pair_depth, pair_depth,
-                  -1,
-                  c_a, c_b, c_feature, c_slot, c_point, c_normal, c_depth, c_pair_depth,
-                  c_previous)
+                  c_a, c_b, c_feature, c_slot, c_point, c_normal, c_depth, c_pair_depth)
             rows += 1
     return rows
 

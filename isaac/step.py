@@ -176,9 +176,9 @@ def detect(model: Model, cfg: StepSettings, state: State, work: Workspace,
     rows = collide_pairs(work.pair_a, work.pair_b, pairs, work.vertices, work.normals,
                          model.vertex_count, model.radius, state.velocity,
                          state.angular_velocity, cfg.look_ahead, cfg.gravity_reach,
-                         cfg.two_points, cfg.hysteresis, cache.key, cache.feature, cache.slot,
+                         cfg.two_points, cfg.hysteresis, cache.key, cache.feature,
                          work.a, work.b, work.feature, work.slot, work.point, work.normal,
-                         work.depth, work.pair_depth, work.previous)
+                         work.depth, work.pair_depth)
     match_previous(rows, work.a, work.b, work.feature, work.slot, model.n_bodies, cache.key,
                    cache.feature, cache.slot, work.previous)
     return rows

@@ -85,10 +85,6 @@ class State:
     angular_velocity: np.ndarray
     exists: np.ndarray
 
-    def copy(self) -> "State":
-        return State(self.step, self.position.copy(), self.angle.copy(), self.velocity.copy(),
-                     self.angular_velocity.copy(), self.exists.copy())
-
 
 PI = np.pi
 TWO_PI = 2.0 * np.pi  # exactly twice the float pi
