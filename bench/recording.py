@@ -2,7 +2,8 @@
 
 `python -m bench.recording --scene pyramid-20 --preset balanced --out DIR` prints one JSON line:
 ms/step of ISAAC alone, with the MCAP log, with the Rerun recording and with both (interleaved
-repetitions, medians), the overhead of each (ms/step above the plain run) and, when the
+repetitions, medians), the overhead of each (per repetition against the plain run beside it,
+then the median), the one-off seconds to open and to close the files, and, when the
 `isaac replay` command is there, the replay speed of the MCAP log (steps/s, whole process, so
 start-up is included and stated).
 
@@ -23,13 +24,15 @@ import time
 from bench.scenes import build, with_preset
 
 
-def _time_run(scene, steps: int, mcap_path=None, rrd_path=None) -> float:
-    """ms/step of `steps` steps, each record written when a path is given.
+def _time_run(scene, steps: int, mcap_path=None, rrd_path=None) -> dict:
+    """Times of one run of `steps` steps, each record written when a path is given.
 
-    The clock covers the steps, their writes and closing the files (flushing what is left); it
-    starts after the recorder is opened with step 0 written, a one-off cost per run (the
-    expanded scene's YAML, the file headers: 20-60 ms for the piles) that a 120-step timing
-    would otherwise spread as 0.2-0.5 ms over every step."""
+    ``ms_per_step`` covers the steps, their writes and the wait until the writers have taken
+    every step (`Recorder.drain`): the steady cost. One-off costs are timed apart, in seconds:
+    ``open_s`` from creating the recorder to its writer processes being ready with step 0
+    written (the expanded scene's YAML, the file headers, the child's imports), and
+    ``close_s`` for finishing the files (summary, index, fsync, rename). A 120-step timing
+    would otherwise spread 0.3-1 s of them over every step."""
     from isaac.simulation import Simulation
 
     sim = Simulation(scene)
@@ -37,16 +40,23 @@ def _time_run(scene, steps: int, mcap_path=None, rrd_path=None) -> float:
         t0 = time.perf_counter()
         for _ in range(steps):
             sim.step()
-        return 1000.0 * (time.perf_counter() - t0) / steps
+        return {"ms_per_step": 1000.0 * (time.perf_counter() - t0) / steps}
     from recorder import Recorder
 
+    t_open = time.perf_counter()
     rec = Recorder(sim, mcap_path=mcap_path, rrd_path=rrd_path)
     rec.write(sim.record())
+    rec.wait_ready()
+    rec.drain()
     t0 = time.perf_counter()
     for _ in range(steps):
         rec.write(sim.step())
+    rec.drain()
+    t1 = time.perf_counter()
     rec.close()
-    return 1000.0 * (time.perf_counter() - t0) / steps
+    t2 = time.perf_counter()
+    return {"ms_per_step": 1000.0 * (t1 - t0) / steps, "open_s": t0 - t_open,
+            "close_s": t2 - t1}
 
 
 def _available(module: str) -> str | None:
@@ -81,23 +91,33 @@ def run(scene_name: str, preset: str, out_dir: str, reps: int, steps: int) -> di
         if "mcap" in modes and "rerun" in modes:
             modes["both"] = {**modes["mcap"], **modes["rerun"]}
     _time_run(scene, 20)  # load the compiled kernels outside the clock
-    times: dict[str, list[float]] = {m: [] for m in modes}
+    runs: dict[str, list[dict]] = {m: [] for m in modes}
     errors: dict[str, str] = {}
     for _ in range(reps):
         for mode, paths in modes.items():
             if mode in errors:
                 continue
             try:
-                times[mode].append(_time_run(scene, steps, **paths))
+                runs[mode].append(_time_run(scene, steps, **paths))
             except Exception as exc:  # noqa: BLE001 - a writer in progress: note it, go on
                 errors[mode] = f"{type(exc).__name__}: {exc}"
     for mode, why in errors.items():
         result["notes"].append(f"{mode} failed: {why}")
-    medians = {m: statistics.median(t) for m, t in times.items() if t}
+    medians = {m: statistics.median(r["ms_per_step"] for r in rs) for m, rs in runs.items() if rs}
     result["ms_per_step"] = medians
+    result["ms_per_step_reps"] = {m: [r["ms_per_step"] for r in rs] for m, rs in runs.items()}
+    for key in ("open_s", "close_s"):
+        result[key] = {m: statistics.median(r[key] for r in rs) for m, rs in runs.items()
+                       if rs and key in rs[0]}
     if "plain" in medians:
         result["overhead_ms_per_step"] = {m: v - medians["plain"] for m, v in medians.items()
                                           if m != "plain"}
+        # the overhead of each repetition against the plain run next to it (interleaved, so
+        # the machine's drift hits both), then the median: the figure the targets are read on
+        plain = [r["ms_per_step"] for r in runs["plain"]]
+        result["overhead_fraction"] = {
+            m: statistics.median(r["ms_per_step"] / p - 1.0 for r, p in zip(rs, plain))
+            for m, rs in runs.items() if m != "plain" and rs}
     for mode in ("mcap", "rerun"):
         if mode in medians and mode in modes:
             path = next(iter(modes[mode].values()))
@@ -150,7 +170,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--scene", default="pyramid-20")
     parser.add_argument("--preset", default="balanced")
     parser.add_argument("--out", default="bench/results")
-    parser.add_argument("--reps", type=int, default=3)
+    parser.add_argument("--reps", type=int, default=5)
     parser.add_argument("--steps", type=int, default=300)
     args = parser.parse_args(argv)
     # the process-level tuning `isaac run` and the Recorder apply (isaac.tuning), applied up

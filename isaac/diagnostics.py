@@ -7,13 +7,12 @@ recorder's per-step `/stats` cost one kernel call rather than a dozen numpy redu
 
 from __future__ import annotations
 
-import hashlib
 from dataclasses import dataclass
 
 import numba
 import numpy as np
 
-from isaac.records import StepRecord
+from isaac.records import StepRecord, state_hash  # noqa: F401 - re-exported
 
 
 @dataclass(frozen=True)
@@ -98,14 +97,3 @@ def all_finite(record: StepRecord) -> bool:
     return bool(_finite(tuple(np.ravel(np.asarray(a, dtype=np.float64)) for a in arrays)))
 
 
-def state_hash(record: StepRecord) -> str:
-    """sha256 (hex) of the exact bits of the body state after the step.
-
-    Covers position, angle, velocity, angular velocity and existence, as little-endian float64 /
-    uint8 in body order. Two runs agree bit for bit exactly when their hashes agree.
-    """
-    h = hashlib.sha256()
-    for arr in (record.position, record.angle, record.velocity, record.angular_velocity):
-        h.update(np.ascontiguousarray(arr, dtype="<f8").tobytes())
-    h.update(np.ascontiguousarray(record.exists, dtype=np.uint8).tobytes())
-    return h.hexdigest()

@@ -16,6 +16,7 @@ Conventions used by every field below (and by the log format, docs/log-format.md
 
 from __future__ import annotations
 
+import hashlib
 from dataclasses import dataclass
 
 import numpy as np
@@ -93,3 +94,16 @@ class StepRecord:
     angular_velocity: np.ndarray
     exists: np.ndarray
     contacts: Contacts
+
+
+def state_hash(record: StepRecord) -> str:
+    """sha256 (hex) of the exact bits of the body state after the step.
+
+    Covers position, angle, velocity, angular velocity and existence, as little-endian float64 /
+    uint8 in body order. Two runs agree bit for bit exactly when their hashes agree.
+    """
+    h = hashlib.sha256()
+    for arr in (record.position, record.angle, record.velocity, record.angular_velocity):
+        h.update(np.ascontiguousarray(arr, dtype="<f8").tobytes())
+    h.update(np.ascontiguousarray(record.exists, dtype=np.uint8).tobytes())
+    return h.hexdigest()

@@ -29,9 +29,8 @@ from fractions import Fraction
 import numpy as np
 from mcap.writer import CompressionType, Writer
 
-from isaac.diagnostics import state_hash
 from isaac.errors import LogError
-from isaac.records import StepRecord
+from isaac.records import StepRecord, state_hash
 from recorder import schema as S
 
 PROFILE = "isaac"
@@ -205,6 +204,8 @@ class McapLogWriter:
     flush_every: close the chunk and flush to the OS every this many steps (1..100).
     compression: "none", "lz4" or "zstd" (per chunk).
     foxglove: a `recorder.foxglove.SceneEncoder` to also write ``/foxglove/scene``, or None.
+    metadata: the ``isaac`` metadata record; default `build_metadata` of ``scene`` (a writer
+        process gets it ready-made, with ``scene`` reduced to its name and ``world.dt``).
     background: encode in the caller's thread, but hand the bytes to a writer thread for the MCAP
         bookkeeping, compression and file writes. Off by default: with the engine's kernels
         holding the GIL it measured slower (GIL hand-offs), not faster. The bytes of the file
@@ -213,7 +214,8 @@ class McapLogWriter:
 
     def __init__(self, path: str, model, scene, scene_text: str, *, flush_every: int = 100,
                  compression: str = "none", chunk_size: int = 256 * 1024,
-                 background: bool = False, foxglove=None) -> None:
+                 background: bool = False, foxglove=None,
+                 metadata: dict[str, str] | None = None) -> None:
         if not 1 <= flush_every <= 100:
             raise ValueError("flush_every must be in 1..100")
         if compression not in COMPRESSION:
@@ -237,7 +239,9 @@ class McapLogWriter:
         w = self._writer
         w.start(profile=PROFILE, library=LIBRARY)
         # metadata and attachment first: they sit before every chunk and survive a crash
-        w.add_metadata(META_START, build_metadata(scene, scene_text, len(model.names)))
+        if metadata is None:
+            metadata = build_metadata(scene, scene_text, len(model.names))
+        w.add_metadata(META_START, metadata)
         w.add_attachment(create_time=0, log_time=0, name=SCENE_ATTACHMENT,
                          media_type="application/yaml", data=scene_text.encode("utf-8"))
         fds = S.schema_bytes()

@@ -20,9 +20,8 @@ import math
 
 import numpy as np
 
-from isaac import diagnostics
 from isaac.errors import IsaacError, LogError, SimulationError
-from isaac.records import StepRecord
+from isaac.records import StepRecord, state_hash
 from isaac.tuning import reuse_large_buffers
 
 _CONTACT_FLOATS = ("point", "normal", "depth", "push_a", "push_b", "impulse", "tangent_impulse",
@@ -35,6 +34,8 @@ def compute_stats(model, gravity, record: StepRecord, with_hash: bool = True) ->
 
     with_hash: False leaves out ``state_hash``; the MCAP writer then computes it in its thread.
     """
+    from isaac import diagnostics  # compiled kernels: not imported by the writer processes
+
     totals = diagnostics.summary(model, record, gravity)
     ke, pe = totals.kinetic_energy, totals.potential_energy
     p = totals.linear_momentum
@@ -52,7 +53,7 @@ def compute_stats(model, gravity, record: StepRecord, with_hash: bool = True) ->
         "max_impulse": float(np.max(c.impulse)) if n else 0.0,
     }
     if with_hash:
-        stats["state_hash"] = diagnostics.state_hash(record)
+        stats["state_hash"] = state_hash(record)
     return stats
 
 
@@ -71,6 +72,8 @@ def _first_bad_row(arr: np.ndarray) -> int | None:
 
 def check_finite(names, record: StepRecord) -> None:
     """Raise `SimulationError` (naming step and body) if the record holds a NaN or infinity."""
+    from isaac import diagnostics
+
     if diagnostics.all_finite(record):
         return
     for field in _BODY_FLOATS:
@@ -104,12 +107,16 @@ class Recorder:
         for Foxglove's 3D panel; off by default (it costs more than the physics channels).
     impulse_scale: length (m) of an impulse arrow per N s in the Rerun view; default from the
         scene's sizes and masses (written in the recording).
+    offload: where the files are encoded and written: "process" (default: one child process per
+        file, fed through shared memory, see recorder.writer_process), "thread" (MCAP in a
+        thread of this process, Rerun in the caller) or "none" (all in the caller). The files'
+        bytes are the same in all three.
     """
 
     def __init__(self, sim, mcap_path: str | None = None, rrd_path: str | None = None, *,
                  scene_text: str | None = None, compression: str = "none",
                  flush_every: int = 100, foxglove: bool = False,
-                 impulse_scale: float | None = None) -> None:
+                 impulse_scale: float | None = None, offload: str = "process") -> None:
         # a step's messages are 100 kB and more: keep such buffers in the heap (isaac.tuning)
         reuse_large_buffers()
         self.sim = sim
@@ -129,39 +136,83 @@ class Recorder:
         self.last_step: int | None = None
         self.closed = False
         self.paths: dict[str, str] = {}
+        if offload not in ("process", "thread", "none"):
+            raise ValueError("offload must be 'process', 'thread' or 'none'")
         try:
             if mcap_path is not None:
-                from recorder.mcap_writer import McapLogWriter
-                scene_encoder = None
-                if foxglove:
-                    from recorder.foxglove import SceneEncoder
-                    from recorder.rerun_writer import default_scales
-                    auto_impulse, normal_length = default_scales(self.model)
-                    scene_encoder = SceneEncoder(
-                        self.model, normal_length=normal_length,
-                        impulse_scale=auto_impulse if impulse_scale is None else impulse_scale)
-                self.mcap = McapLogWriter(mcap_path, self.model, self.scene, scene_text,
-                                          flush_every=flush_every, compression=compression,
-                                          foxglove=scene_encoder, background=True)
+                self.mcap = self._mcap_writer(mcap_path, offload, compression, flush_every,
+                                              foxglove, impulse_scale)
             if rrd_path is not None:
-                from recorder.rerun_writer import RerunLogWriter
-                self.rerun = RerunLogWriter(rrd_path, self.model, self.scene,
-                                            impulse_scale=impulse_scale)
+                self.rerun = self._rerun_writer(rrd_path, offload, impulse_scale)
         except BaseException:
             self._abandon()
             raise
+
+    def _mcap_writer(self, path, offload, compression, flush_every, foxglove, impulse_scale):
+        from recorder.mcap_writer import McapLogWriter, build_metadata
+
+        fox = None
+        if foxglove:
+            from recorder.rerun_writer import default_scales
+            auto_impulse, normal_length = default_scales(self.model)
+            fox = {"normal_length": normal_length,
+                   "impulse_scale": auto_impulse if impulse_scale is None else impulse_scale}
+        if offload == "process":
+            from recorder.writer_process import WriterProcess, model_table
+            return WriterProcess("mcap", path, {
+                "model": model_table(self.model),
+                "scene": {"name": str(self.scene.name), "dt": float(self.scene.world.dt)},
+                "scene_text": self.scene_text,
+                "metadata": build_metadata(self.scene, self.scene_text, len(self.model.names)),
+                "flush_every": flush_every, "compression": compression, "foxglove": fox})
+        scene_encoder = None
+        if fox is not None:
+            from recorder.foxglove import SceneEncoder
+            scene_encoder = SceneEncoder(self.model, **fox)
+        return McapLogWriter(path, self.model, self.scene, self.scene_text,
+                             flush_every=flush_every, compression=compression,
+                             foxglove=scene_encoder, background=offload == "thread")
+
+    def _rerun_writer(self, path, offload, impulse_scale):
+        if offload == "process":
+            from recorder.writer_process import WriterProcess, model_table
+            return WriterProcess("rerun", path, {
+                "model": model_table(self.model),
+                "scene": {"name": str(self.scene.name), "dt": float(self.scene.world.dt)},
+                "impulse_scale": impulse_scale})
+        from recorder.rerun_writer import RerunLogWriter
+        return RerunLogWriter(path, self.model, self.scene, impulse_scale=impulse_scale)
+
+    def wait_ready(self) -> None:
+        """Block until the writer processes have started (a one-off 0.3-1 s, normally hidden
+        behind the first steps); a no-op for in-process writers. Benchmarks call it so that
+        they time the steady state."""
+        for writer in (self.mcap, self.rerun):
+            if writer is not None and hasattr(writer, "wait_ready"):
+                writer.wait_ready()
+
+    def drain(self) -> None:
+        """Block until the writers have taken every step written so far (in-process writers
+        take them at once)."""
+        for writer in (self.mcap, self.rerun):
+            if writer is not None and hasattr(writer, "drain"):
+                writer.drain()
 
     def write(self, record: StepRecord) -> None:
         """Record one step (in order, starting with step 0). Raises SimulationError on NaN/inf."""
         if self.closed:
             raise LogError("the recorder is closed")
-        check_finite(self.model.names, record)
-        # only MCAP's /stats carries the state hash: its writer (thread) computes it
+        first = self.mcap if self.mcap is not None else self.rerun
+        if not getattr(first, "checks_finite", False):
+            check_finite(self.model.names, record)
+        # only MCAP's /stats carries the state hash: its writer computes it
         stats = compute_stats(self.model, self.gravity, record, with_hash=False)
-        if self.mcap is not None:
-            self.mcap.write(record, stats)
-        if self.rerun is not None:
-            self.rerun.write(record, stats)
+        for writer in (self.mcap, self.rerun):
+            if writer is not None and writer.write(record, stats) is False:
+                # a writer process found a NaN or infinity while copying: nothing was sent
+                check_finite(self.model.names, record)
+                raise SimulationError(f"step {record.step}: a recorded value is not finite",
+                                      step=record.step)
         self.steps_written += 1
         self.last_step = record.step
 

@@ -283,8 +283,14 @@ def test_sigkilled_writer_leaves_a_partial_file_with_every_flushed_step(tmp_path
                 pass
             time.sleep(0.05)
     finally:
+        writers = _children(proc.pid)
         os.kill(proc.pid, signal.SIGKILL)
         proc.wait()
+    # the writer process outlives the killed run: it writes out the steps it was handed and
+    # exits (the command pipe ended); read the file once it is done
+    deadline = time.time() + 30
+    while any(Path(f"/proc/{c}").exists() for c in writers) and time.time() < deadline:
+        time.sleep(0.05)
     partial = Path(str(path) + ".partial")
     log = LogReader(str(partial))
     assert not log.closed_cleanly
@@ -296,6 +302,19 @@ def test_sigkilled_writer_leaves_a_partial_file_with_every_flushed_step(tmp_path
     out = run_cli("recover", str(partial), str(path))
     assert out.returncode == 0, out.stderr
     assert [s.step for s in LogReader(str(path)).steps()] == steps
+
+
+def _children(pid: int) -> list[int]:
+    """Processes whose parent is `pid` (Linux /proc; empty elsewhere)."""
+    out = []
+    for entry in Path("/proc").glob("[0-9]*"):
+        try:
+            stat = (entry / "stat").read_text()
+        except OSError:
+            continue
+        if int(stat.rsplit(")", 1)[1].split()[1]) == pid:
+            out.append(int(entry.name))
+    return out
 
 
 def run_cli(*args):

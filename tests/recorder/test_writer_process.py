@@ -1,0 +1,195 @@
+"""Writer processes (recorder.writer_process): same bytes as in-process writing, frames that
+round-trip exactly, NaN refused before anything is sent, a dead or failing child reported in
+one line."""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+import signal
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from isaac.errors import LogError, SimulationError
+from isaac.records import Contacts, StepRecord
+from recorder import Recorder
+from recorder import writer_process as W
+from recorder.reader import LogReader
+from recorder.recording import compute_stats
+
+sys.path.insert(0, str(Path(__file__).parent))
+from recorder_synth import SCENE_TEXT, SynthSim  # noqa: E402
+
+
+def _records(n=12, contacts=6, steps=120, leave_at=None):
+    sim = SynthSim(n, contacts, leave_at=leave_at)
+    return sim, [sim.record()] + [sim.step() for _ in range(steps)]
+
+
+def _assert_same_record(a: StepRecord, b: StepRecord):
+    assert (a.step, a.time) == (b.step, b.time)
+    for name in ("position", "angle", "velocity", "angular_velocity", "exists"):
+        np.testing.assert_array_equal(getattr(a, name), getattr(b, name))
+    for f in dataclasses.fields(Contacts):
+        x, y = getattr(a.contacts, f.name), getattr(b.contacts, f.name)
+        assert x.shape == y.shape and x.dtype.kind == y.dtype.kind
+        np.testing.assert_array_equal(x, y)
+
+
+def test_a_frame_packed_by_the_compiled_copy_unpacks_to_the_same_record_and_stats():
+    sim, records = _records(steps=30)
+    ring = np.zeros(1 << 20, dtype=np.uint8)
+    proc = W.WriterProcess.__new__(W.WriterProcess)  # only the packing half, no child
+    proc._view = memoryview(ring)
+    proc._ring_f8, proc._ring_i4, proc._ring_u8 = (ring.view(np.float64), ring.view(np.int32),
+                                                   ring)
+    for r in records:
+        stats = compute_stats(sim.model, (0.0, -9.81), r, with_hash=False)
+        size = W.frame_size(r)
+        assert proc._compiled_pack(8, r, stats) == -1
+        frame = bytes(ring[8:8 + size])
+        assert frame == W.pack(r, stats)  # compiled and Python packing agree byte for byte
+        back, back_stats = W.unpack(frame)
+        _assert_same_record(back, r)
+        for k in W.STAT_KEYS:
+            assert back_stats[k] == stats[k]
+
+
+@pytest.mark.parametrize("field", ["position", "angular_velocity", "normal", "impulse",
+                                   "restitution"])
+@pytest.mark.parametrize("bad", [np.nan, np.inf])
+def test_the_compiled_copy_refuses_a_nan_or_infinity_in_any_float_field(field, bad):
+    sim, records = _records(steps=3)
+    r = records[-1]
+    if hasattr(r, field):
+        arr = getattr(r, field).copy()
+        arr.flat[arr.size - 1] = bad
+        r = dataclasses.replace(r, **{field: arr})
+    else:
+        arr = getattr(r.contacts, field).copy()
+        arr.flat[0] = bad
+        r = dataclasses.replace(r, contacts=dataclasses.replace(r.contacts, **{field: arr}))
+    ring = np.zeros(1 << 20, dtype=np.uint8)
+    proc = W.WriterProcess.__new__(W.WriterProcess)
+    proc._view = memoryview(ring)
+    proc._ring_f8, proc._ring_i4, proc._ring_u8 = (ring.view(np.float64), ring.view(np.int32),
+                                                   ring)
+    stats = compute_stats(sim.model, (0.0, -9.81), records[-2], with_hash=False)
+    order = [f for f, _, _ in W._BODY_FIELDS + W._CONTACT_FIELDS]
+    assert proc._compiled_pack(0, r, stats) == order.index(field)
+
+
+@pytest.mark.parametrize("ring_bytes", [None, 64 * 1024])  # the second forces wraps and waits
+def test_writer_processes_write_the_same_bytes_as_writing_in_process(tmp_path, ring_bytes):
+    sim, records = _records(n=30, contacts=20, steps=160, leave_at=70)
+    paths = {}
+    for offload in ("none", "process"):
+        path = tmp_path / f"{offload}.mcap"
+        rec = Recorder(sim, mcap_path=str(path), scene_text=SCENE_TEXT, offload=offload)
+        if offload == "process" and ring_bytes is not None:
+            # a ring a few frames long: every wrap and every wait for the child is exercised
+            rec.mcap.close()
+            rec.mcap = W.WriterProcess("mcap", str(path), _mcap_config(rec), ring_bytes=ring_bytes)
+        for r in records:
+            rec.write(r)
+        rec.close()
+        paths[offload] = path
+    assert paths["none"].read_bytes() == paths["process"].read_bytes()
+
+
+def _mcap_config(rec):
+    from recorder.mcap_writer import build_metadata
+    return {"model": W.model_table(rec.model),
+            "scene": {"name": str(rec.scene.name), "dt": float(rec.scene.world.dt)},
+            "scene_text": rec.scene_text,
+            "metadata": build_metadata(rec.scene, rec.scene_text, len(rec.model.names)),
+            "flush_every": 100, "compression": "none", "foxglove": None}
+
+
+def test_a_frame_larger_than_the_ring_goes_inline_and_arrives_whole(tmp_path):
+    sim, records = _records(n=40, contacts=30, steps=20)
+    rec = Recorder(sim, mcap_path=str(tmp_path / "a.mcap"), scene_text=SCENE_TEXT)
+    rec.mcap.close()
+    rec.mcap = W.WriterProcess("mcap", str(tmp_path / "a.mcap"), _mcap_config(rec),
+                               ring_bytes=4096)
+    assert W.frame_size(records[5]) > 4096
+    for r in records:
+        rec.write(r)
+    rec.close()
+    got = list(LogReader(str(tmp_path / "a.mcap")).steps())
+    assert [s.step for s in got] == [r.step for r in records]
+    for s, r in zip(got, records):
+        _assert_same_record(s.record, r)
+
+
+def test_nan_through_a_writer_process_names_step_and_body_and_keeps_earlier_steps(tmp_path):
+    sim, records = _records(steps=40)
+    bad = records[30]
+    pos = bad.position.copy()
+    pos[3, 1] = np.nan
+    records[30] = dataclasses.replace(bad, position=pos)
+    path = tmp_path / "nan.mcap"
+    rec = Recorder(sim, mcap_path=str(path), scene_text=SCENE_TEXT)
+    with pytest.raises(SimulationError, match=r"step 30: body 'body3'"):
+        with rec:
+            for r in records:
+                rec.write(r)
+    assert [s.step for s in LogReader(str(path)).steps()] == list(range(30))
+
+
+def test_an_unwritable_output_fails_at_once_in_one_line(tmp_path):
+    sim, _ = _records(steps=1)
+    with pytest.raises(LogError, match="cannot write .*missing"):
+        Recorder(sim, mcap_path=str(tmp_path / "missing" / "x.mcap"), scene_text=SCENE_TEXT)
+
+
+def test_a_writer_process_that_dies_is_reported_with_the_file_name(tmp_path):
+    sim, records = _records(steps=200)
+    path = tmp_path / "dead.mcap"
+    rec = Recorder(sim, mcap_path=str(path), scene_text=SCENE_TEXT)
+    rec.wait_ready()
+    os.kill(rec.mcap.proc.pid, signal.SIGKILL)
+    rec.mcap.proc.wait()
+    with pytest.raises(LogError, match=r"writing .*dead\.mcap\.partial failed: the writer "
+                                       r"process stopped \(exit code -9\)"):
+        for r in records:
+            rec.write(r)
+        rec.close()
+    rec._abandon()
+
+
+def test_a_failure_inside_the_writer_process_comes_back_as_its_message(tmp_path):
+    sim, records = _records(steps=5)
+    path = tmp_path / "bad.mcap"
+    rec = Recorder(sim, mcap_path=str(path), scene_text=SCENE_TEXT, offload="none")
+    config = _mcap_config(rec)
+    rec.close()
+    config["compression"] = "brotli"  # refused by the MCAP writer, in the child
+    proc = W.WriterProcess("mcap", str(path), config)
+    with pytest.raises(LogError, match="compression must be one of"):
+        proc.wait_ready()
+    proc.abandon()
+
+
+def test_the_writer_process_starts_without_the_compiled_kernels():
+    import subprocess
+    out = subprocess.run(
+        [sys.executable, "-c", "import sys, recorder.writer_process, recorder.mcap_writer, "
+         "recorder.rerun_writer; print('numba' in sys.modules)"],
+        capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "False"
+
+
+def test_drain_returns_once_every_step_is_written(tmp_path):
+    sim, records = _records(steps=50)
+    path = tmp_path / "d.mcap"
+    rec = Recorder(sim, mcap_path=str(path), scene_text=SCENE_TEXT, flush_every=10)
+    for r in records[:41]:
+        rec.write(r)
+    rec.drain()  # no waiting after this: the flushed steps are in the file now
+    steps = [s.step for s in LogReader(str(path) + ".partial").steps()]
+    assert steps == list(range(40))  # chunks closed after steps 0, 9, ..., 39
+    rec.close()
