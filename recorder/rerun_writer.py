@@ -149,35 +149,28 @@ class RerunLogWriter:
         self._steps: list[int] = []
         self._times: list[float] = []
         self._records: list[StepRecord] = []
-        self._moving: list[tuple[np.ndarray, np.ndarray]] = []
+        self._moving: list[np.ndarray] = []  # moving bodies' indices per step (shared)
         self._stat_dicts: list[dict] = []
 
     def _batch_strips(self) -> tuple[np.ndarray, list[int]]:
-        """(sum k, v_max + 1, 2) float32 outlines of the buffered steps and k per step; the
-        same arithmetic as `_outlines`, over runs of steps with the same moving bodies."""
+        """(sum k, v_max + 1, 2) float32 outlines of the buffered steps and k per step, one
+        compiled pass per run of steps with the same moving bodies."""
+        from recorder.rerun_batch import outlines
+
         recs, moving = self._records, self._moving
         out = []
         counts = []
         i = 0
         while i < len(recs):
-            idx, local_c = moving[i]
+            idx = moving[i]
             j = i + 1
-            while j < len(recs) and moving[j][0] is idx:
+            while j < len(recs) and moving[j] is idx:
                 j += 1
-            k = idx.size
-            counts.extend([k] * (j - i))
-            if k:
-                angle = np.stack([r.angle for r in recs[i:j]])[:, idx]
-                position = np.stack([r.position for r in recs[i:j]])[:, idx]
-                rot = np.empty(angle.shape, dtype=np.complex128)
-                rot.real = np.cos(angle)
-                rot.imag = np.sin(angle)
-                pos = np.empty(angle.shape, dtype=np.complex128)
-                pos.real = position[..., 0]
-                pos.imag = position[..., 1]
-                z = local_c[None, :, :] * rot[:, :, None]
-                z += pos[:, :, None]
-                out.append(z.view(np.float64).reshape((j - i) * k, -1, 2).astype(np.float32))
+            counts.extend([idx.size] * (j - i))
+            if idx.size:
+                angle = np.stack([r.angle for r in recs[i:j]])
+                position = np.stack([r.position for r in recs[i:j]])
+                out.append(outlines(angle, position, idx, self.outline_local))
             i = j
         v_len = self.outline_local.shape[1]
         strips = np.concatenate(out) if out else np.zeros((0, v_len, 2), dtype=np.float32)
@@ -230,11 +223,10 @@ class RerunLogWriter:
         if key != self._moving_key:
             self._moving_key = key
             self._moving_index = np.flatnonzero(moving)
-            self._moving_local = np.ascontiguousarray(self._local_complex[self._moving_index])
         # records are immutable: the outlines and arrows of a whole batch are computed in _send,
         # a few numpy calls per batch instead of per step
         self._records.append(record)
-        self._moving.append((self._moving_index, self._moving_local))
+        self._moving.append(self._moving_index)
         if stats is not None:
             self._stat_dicts.append(stats)
         if len(self._steps) >= self.batch:
@@ -254,26 +246,15 @@ class RerunLogWriter:
         counts = [len(c) for c in contacts]
         n_steps = len(counts)
         if any(counts):
+            from recorder.rerun_batch import contact_arrows
+
             live = [c for c in contacts if len(c)]
-            normal = np.concatenate([c.normal for c in live])
-            impulse = np.concatenate([c.impulse for c in live])
-            push_a = np.concatenate([c.push_a for c in live])
-            push_b = np.concatenate([c.push_b for c in live])
-            # float32 (what Rerun stores), each value as it was computed per step
-            points = np.concatenate([c.point for c in live]).astype(np.float32)
-            normals = (normal * self.normal_length).astype(np.float32)
-            impulses = (normal * (impulse * self.impulse_scale)[:, None]).astype(np.float32)
-            # push arrows only where a push was applied (slot 0 rows of pushed pairs): per step
-            # those of body a, then those of body b
-            row_step = np.repeat(np.arange(n_steps), counts)
-            moved_a = np.flatnonzero((push_a[:, 0] != 0.0) | (push_a[:, 1] != 0.0))
-            moved_b = np.flatnonzero((push_b[:, 0] != 0.0) | (push_b[:, 1] != 0.0))
-            order = np.argsort(np.concatenate([2 * row_step[moved_a], 2 * row_step[moved_b] + 1]),
-                               kind="stable")
-            push_pt = np.concatenate([points[moved_a], points[moved_b]])[order]
-            push_v = np.concatenate([push_a[moved_a], push_b[moved_b]])[order].astype(np.float32)
-            push_counts = (np.bincount(row_step[moved_a], minlength=n_steps)
-                           + np.bincount(row_step[moved_b], minlength=n_steps)).tolist()
+            points, normals, impulses, push_pt, push_v, push_counts = contact_arrows(
+                np.asarray(counts, dtype=np.int64),
+                *(np.concatenate([getattr(c, f) for c in live])
+                  for f in ("point", "normal", "impulse", "push_a", "push_b")),
+                self.normal_length, self.impulse_scale)
+            push_counts = push_counts.tolist()
         else:
             points = normals = impulses = push_pt = push_v = _EMPTY2
             push_counts = [0] * n_steps
