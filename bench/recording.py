@@ -24,39 +24,67 @@ import time
 from bench.scenes import build, with_preset
 
 
-def _time_run(scene, steps: int, mcap_path=None, rrd_path=None) -> dict:
-    """Times of one run of `steps` steps, each record written when a path is given.
+BLOCK = 100  # steps per timed block
 
-    ``ms_per_step`` covers the steps, their writes and the wait until the writers have taken
-    every step (`Recorder.drain`): the steady cost. One-off costs are timed apart, in seconds:
-    ``open_s`` from creating the recorder to its writer processes being ready with step 0
-    written (the expanded scene's YAML, the file headers, the child's imports), and
-    ``close_s`` for finishing the files (summary, index, fsync, rename). A 120-step timing
-    would otherwise spread 0.3-1 s of them over every step."""
+
+def _time_paired(scene, steps: int, mcap_path=None, rrd_path=None) -> dict:
+    """Two simulations of `scene` in lockstep, one plain and one recorded, timed in alternating
+    blocks of BLOCK steps; the overhead is (recorded time) / (plain time) over all blocks - 1.
+
+    This machine's speed drifts by up to 1.6x from second to second (shared host), which made
+    separate timings of plain and recorded runs, even interleaved ones, differ by more than the
+    overhead itself. Blocks a few milliseconds apart see the same machine. A recorded block
+    ends with `Recorder.drain` (every step taken by its writer processes), so their Python
+    work is charged to it even when they lag; Rerun's own encoder threads run on as they would
+    in a run, and the last block waits for them too (``settle``). Sums, not medians, so that
+    the Rerun writer's batch every 100 steps counts. Opening (writer processes started, step 0
+    written) and closing the files are one-off costs, timed apart in seconds.
+    """
     from isaac.simulation import Simulation
 
-    sim = Simulation(scene)
-    if mcap_path is None and rrd_path is None:
-        t0 = time.perf_counter()
-        for _ in range(steps):
-            sim.step()
-        return {"ms_per_step": 1000.0 * (time.perf_counter() - t0) / steps}
+    plain, recorded = Simulation(scene), Simulation(scene)
+    for _ in range(20):  # load the compiled kernels outside the clock
+        plain.step()
+        recorded.step()
     from recorder import Recorder
 
     t_open = time.perf_counter()
-    rec = Recorder(sim, mcap_path=mcap_path, rrd_path=rrd_path)
-    rec.write(sim.record())
+    rec = Recorder(recorded, mcap_path=mcap_path, rrd_path=rrd_path)
+    rec.write(recorded.record())
     rec.wait_ready()
     rec.drain()
+    opened = time.perf_counter() - t_open
+    t_plain = t_rec = 0.0
+    done = 0
+    while done < steps:
+        n = min(BLOCK, steps - done)
+        t0 = time.perf_counter()
+        for _ in range(n):
+            plain.step()
+        t1 = time.perf_counter()
+        for _ in range(n):
+            rec.write(recorded.step())
+        rec.drain(settle=done + n >= steps)
+        t2 = time.perf_counter()
+        t_plain += t1 - t0
+        t_rec += t2 - t1
+        done += n
     t0 = time.perf_counter()
-    for _ in range(steps):
-        rec.write(sim.step())
-    rec.drain()
-    t1 = time.perf_counter()
     rec.close()
-    t2 = time.perf_counter()
-    return {"ms_per_step": 1000.0 * (t1 - t0) / steps, "open_s": t0 - t_open,
-            "close_s": t2 - t1}
+    return {"plain_ms_per_step": 1000.0 * t_plain / steps,
+            "ms_per_step": 1000.0 * t_rec / steps, "overhead": t_rec / t_plain - 1.0,
+            "open_s": opened, "close_s": time.perf_counter() - t0}
+
+
+def _time_in_process(scene_name: str, preset: str, steps: int, paths: dict) -> dict:
+    """`_time_paired` in a process of its own (`--one`)."""
+    cmd = [sys.executable, "-m", "bench.recording", "--scene", scene_name, "--preset", preset,
+           "--steps", str(steps), "--one", json.dumps(paths)]
+    proc = subprocess.run(cmd, capture_output=True, text=True, check=False, timeout=900)
+    if proc.returncode != 0:
+        tail = (proc.stderr or proc.stdout).strip().splitlines()[-1:] or [f"exit {proc.returncode}"]
+        raise RuntimeError(tail[0])
+    return json.loads(proc.stdout.strip().splitlines()[-1])
 
 
 def _available(module: str) -> str | None:
@@ -90,7 +118,9 @@ def run(scene_name: str, preset: str, out_dir: str, reps: int, steps: int) -> di
                 modes[mode] = {key: os.path.join(out_dir, f"bench-{scene_name}.{ext}")}
         if "mcap" in modes and "rerun" in modes:
             modes["both"] = {**modes["mcap"], **modes["rerun"]}
-    _time_run(scene, 20)  # load the compiled kernels outside the clock
+    # each (repetition, mode) in a fresh process, modes interleaved: no run inherits another's
+    # heap, caches or finished writer processes
+    modes.pop("plain")
     runs: dict[str, list[dict]] = {m: [] for m in modes}
     errors: dict[str, str] = {}
     for _ in range(reps):
@@ -98,26 +128,28 @@ def run(scene_name: str, preset: str, out_dir: str, reps: int, steps: int) -> di
             if mode in errors:
                 continue
             try:
-                runs[mode].append(_time_run(scene, steps, **paths))
+                runs[mode].append(_time_in_process(scene_name, preset, steps, paths))
             except Exception as exc:  # noqa: BLE001 - a writer in progress: note it, go on
                 errors[mode] = f"{type(exc).__name__}: {exc}"
     for mode, why in errors.items():
         result["notes"].append(f"{mode} failed: {why}")
-    medians = {m: statistics.median(r["ms_per_step"] for r in rs) for m, rs in runs.items() if rs}
+    done = {m: rs for m, rs in runs.items() if rs}
+    medians = {}
+    if done:
+        medians["plain"] = statistics.median(r["plain_ms_per_step"] for rs in done.values()
+                                             for r in rs)
+    medians.update({m: statistics.median(r["ms_per_step"] for r in rs) for m, rs in done.items()})
     result["ms_per_step"] = medians
-    result["ms_per_step_reps"] = {m: [r["ms_per_step"] for r in rs] for m, rs in runs.items()}
-    for key in ("open_s", "close_s"):
-        result[key] = {m: statistics.median(r[key] for r in rs) for m, rs in runs.items()
-                       if rs and key in rs[0]}
+    result["method"] = (f"plain and recorded simulations in lockstep, alternating blocks of "
+                        f"{BLOCK} steps in one process, {reps} processes per mode")
+    result["overhead_fraction"] = {m: statistics.median(r["overhead"] for r in rs)
+                                   for m, rs in done.items()}
+    result["overhead_reps"] = {m: [r["overhead"] for r in rs] for m, rs in done.items()}
     if "plain" in medians:
-        result["overhead_ms_per_step"] = {m: v - medians["plain"] for m, v in medians.items()
-                                          if m != "plain"}
-        # the overhead of each repetition against the plain run next to it (interleaved, so
-        # the machine's drift hits both), then the median: the figure the targets are read on
-        plain = [r["ms_per_step"] for r in runs["plain"]]
-        result["overhead_fraction"] = {
-            m: statistics.median(r["ms_per_step"] / p - 1.0 for r, p in zip(rs, plain))
-            for m, rs in runs.items() if m != "plain" and rs}
+        result["overhead_ms_per_step"] = {m: medians["plain"] * f
+                                          for m, f in result["overhead_fraction"].items()}
+    for key in ("open_s", "close_s"):
+        result[key] = {m: statistics.median(r[key] for r in rs) for m, rs in done.items()}
     for mode in ("mcap", "rerun"):
         if mode in medians and mode in modes:
             path = next(iter(modes[mode].values()))
@@ -172,12 +204,18 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--out", default="bench/results")
     parser.add_argument("--reps", type=int, default=5)
     parser.add_argument("--steps", type=int, default=300)
+    parser.add_argument("--one", metavar="JSON", help=argparse.SUPPRESS)  # one timed run
     args = parser.parse_args(argv)
     # the process-level tuning `isaac run` and the Recorder apply (isaac.tuning), applied up
     # front so the plain runs and the recorded runs of this process share it
     from isaac.tuning import reuse_large_buffers
 
     reuse_large_buffers()
+    if args.one is not None:
+        scene = with_preset(build(args.scene).scene, args.preset)
+        sys.stdout.write(json.dumps(_time_paired(scene, args.steps, **json.loads(args.one)))
+                         + "\n")
+        return 0
     os.makedirs(args.out, exist_ok=True)
     result = run(args.scene, args.preset, args.out, args.reps, args.steps)
     sys.stdout.write(json.dumps(result) + "\n")

@@ -292,6 +292,32 @@ class McapLogWriter:
         else:
             self._queue.put(item)
 
+    def write_messages(self, step: int, time: float, exists: np.ndarray, bodies, contacts,
+                       stats: dict) -> None:
+        """Append one step already encoded (``bodies``, ``contacts``: the bytes `encode_bodies`
+        and `encode_contacts` give; ``stats`` with its ``state_hash``), in this thread: what a
+        writer process does with the frames `recorder.pack` encodes."""
+        if self._queue is not None:
+            raise LogError("write_messages is for a writer without a background thread")
+        world_changed = self._last_exists is None or not np.array_equal(exists,
+                                                                         self._last_exists)
+        if world_changed:
+            self._last_exists = np.array(exists, dtype=bool)
+        self.steps_written += 1
+        self.last_step = step
+        flush = self.steps_written == 1 or self.steps_written % self.flush_every == 0
+        ch = self._channel
+        t = self.clock(step)
+        add = self._writer.add_message
+        if world_changed:
+            add(ch["/world"], t, encode_world(self.model, step, time, self._last_exists), t,
+                step)
+        add(ch["/bodies"], t, bodies, t, step)
+        add(ch["/contacts"], t, contacts, t, step)
+        add(ch["/stats"], t, encode_stats(step, time, stats), t, step)
+        if flush:
+            self._writer.flush()
+
     def _emit(self, item) -> None:
         record, stats, world_changed, flush = item
         step = record.step

@@ -17,6 +17,7 @@ The recorder never re-derives physics: it writes the record's arrays and the dia
 from __future__ import annotations
 
 import math
+import os
 
 import numpy as np
 
@@ -138,6 +139,16 @@ class Recorder:
         self.paths: dict[str, str] = {}
         if offload not in ("process", "thread", "none"):
             raise ValueError("offload must be 'process', 'thread' or 'none'")
+        self._cpus = iter(())
+        self._restore_affinity: set[int] | None = None
+        if offload == "process":
+            from recorder.writer_process import plan_cpus
+            plan = plan_cpus((mcap_path is not None) + (rrd_path is not None))
+            if plan is not None:
+                # the writers on CPUs of their own, this process on the others, until close
+                self._restore_affinity = os.sched_getaffinity(0)
+                os.sched_setaffinity(0, plan[0])
+                self._cpus = iter(plan[1])
         try:
             if mcap_path is not None:
                 self.mcap = self._mcap_writer(mcap_path, offload, compression, flush_every,
@@ -159,8 +170,8 @@ class Recorder:
                    "impulse_scale": auto_impulse if impulse_scale is None else impulse_scale}
         if offload == "process":
             from recorder.writer_process import WriterProcess, model_table
-            return WriterProcess("mcap", path, {
-                "model": model_table(self.model),
+            return WriterProcess("mcap", path, cpus=next(self._cpus, None), config={
+                "model": model_table(self.model), "gravity": self.gravity,
                 "scene": {"name": str(self.scene.name), "dt": float(self.scene.world.dt)},
                 "scene_text": self.scene_text,
                 "metadata": build_metadata(self.scene, self.scene_text, len(self.model.names)),
@@ -176,8 +187,8 @@ class Recorder:
     def _rerun_writer(self, path, offload, impulse_scale):
         if offload == "process":
             from recorder.writer_process import WriterProcess, model_table
-            return WriterProcess("rerun", path, {
-                "model": model_table(self.model),
+            return WriterProcess("rerun", path, cpus=next(self._cpus, None), config={
+                "model": model_table(self.model), "gravity": self.gravity,
                 "scene": {"name": str(self.scene.name), "dt": float(self.scene.world.dt)},
                 "impulse_scale": impulse_scale})
         from recorder.rerun_writer import RerunLogWriter
@@ -191,12 +202,15 @@ class Recorder:
             if writer is not None and hasattr(writer, "wait_ready"):
                 writer.wait_ready()
 
-    def drain(self) -> None:
+    def drain(self, settle: bool = False) -> None:
         """Block until the writers have taken every step written so far (in-process writers
-        take them at once)."""
+        take them at once); with ``settle``, also until the Rerun writer has written out the
+        batches it has sent (its open batch stays buffered)."""
         for writer in (self.mcap, self.rerun):
             if writer is not None and hasattr(writer, "drain"):
-                writer.drain()
+                writer.drain(settle)
+            elif settle and writer is not None and hasattr(writer, "settle"):
+                writer.settle()
 
     def write(self, record: StepRecord) -> None:
         """Record one step (in order, starting with step 0). Raises SimulationError on NaN/inf."""
@@ -205,8 +219,12 @@ class Recorder:
         first = self.mcap if self.mcap is not None else self.rerun
         if not getattr(first, "checks_finite", False):
             check_finite(self.model.names, record)
-        # only MCAP's /stats carries the state hash: its writer computes it
-        stats = compute_stats(self.model, self.gravity, record, with_hash=False)
+        # only MCAP's /stats carries the state hash: its writer computes it; writer processes
+        # get the rest of the stats from the pass that copies the record (recorder.pack)
+        stats = None
+        if not all(getattr(w, "checks_finite", False) for w in (self.mcap, self.rerun)
+                   if w is not None):
+            stats = compute_stats(self.model, self.gravity, record, with_hash=False)
         for writer in (self.mcap, self.rerun):
             if writer is not None and writer.write(record, stats) is False:
                 # a writer process found a NaN or infinity while copying: nothing was sent
@@ -238,11 +256,21 @@ class Recorder:
                                                reason=reason)
             except Exception as exc:  # noqa: BLE001 - close the other file, then report
                 errors.append(f"{key}: {exc}")
+        self._release_cpus()
         if errors:
             raise LogError("could not finish the log: " + "; ".join(errors))
         return self.paths
 
+    def _release_cpus(self) -> None:
+        if self._restore_affinity is not None:
+            try:
+                os.sched_setaffinity(0, self._restore_affinity)
+            except OSError:
+                pass
+            self._restore_affinity = None
+
     def _abandon(self) -> None:
+        self._release_cpus()
         for writer in (self.mcap, self.rerun):
             if writer is not None:
                 try:

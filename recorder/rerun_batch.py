@@ -14,27 +14,34 @@ import numpy as np
 
 
 @numba.njit(cache=True, nogil=True)
-def outlines(angle, position, idx, local):
-    """World outlines (float32, m) of bodies ``idx`` over R steps: ``(R * k, L, 2)``.
+def outlines(angle, position, idx, local, counts):
+    """Closed world outlines (float32, m) of bodies ``idx`` over R steps, one after the other:
+    per step, body idx[0]'s counts + 1 vertices (vertex 0 repeated last), then idx[1]'s, ...
 
-    angle (R, n) rad, position (R, n, 2) m, local (n, L, 2) closed body-frame outlines (m);
-    vertex = position + R(angle) @ local, counter-clockwise rotation.
+    angle (R, n) rad, position (R, n, 2) m, local (n, V, 2) body-frame vertices (m), counts (n,)
+    vertices per body; vertex = position + R(angle) @ local, counter-clockwise rotation.
+    Returns the (points, 2) array.
     """
-    steps, k, length = angle.shape[0], idx.size, local.shape[1]
-    out = np.empty((steps * k, length, 2), dtype=np.float32)
+    steps = angle.shape[0]
+    per_step = 0
+    for j in range(idx.size):
+        per_step += counts[idx[j]] + 1
+    out = np.empty((steps * per_step, 2), dtype=np.float32)
+    w = 0
     for s in range(steps):
-        for j in range(k):
+        for j in range(idx.size):
             body = idx[j]
             c = np.cos(angle[s, body])
             sn = np.sin(angle[s, body])
             px = position[s, body, 0]
             py = position[s, body, 1]
-            row = s * k + j
-            for v in range(length):
-                lx = local[body, v, 0]
-                ly = local[body, v, 1]
-                out[row, v, 0] = np.float32(px + (lx * c - ly * sn))
-                out[row, v, 1] = np.float32(py + (lx * sn + ly * c))
+            nv = counts[body]
+            for v in range(nv + 1):
+                lx = local[body, v % nv, 0]
+                ly = local[body, v % nv, 1]
+                out[w, 0] = np.float32(px + (lx * c - ly * sn))
+                out[w, 1] = np.float32(py + (lx * sn + ly * c))
+                w += 1
     return out
 
 

@@ -71,17 +71,29 @@ _EMPTY2 = np.zeros((0, 2), dtype=np.float32)
 _STRIP_TYPE = rr.components.LineStrip2DBatch._ARROW_DATATYPE
 
 
-def _strips_arrow(strips: np.ndarray) -> pa.Array:
-    """(k, L, 2) equal-length strips as Rerun's LineStrip2D arrow array, built in one go.
+def _strips_arrow(points: np.ndarray, lengths: np.ndarray) -> pa.Array:
+    """Strips of ``lengths`` points each, one after the other in ``points`` (float32, (p, 2)),
+    as Rerun's LineStrip2D arrow array, built in one go.
 
     Rerun's own conversion walks the strips in Python (one call per strip); this builds the
     same array (list of fixed-size [x, y] float32 lists) from offsets and one flat buffer.
     """
-    k, length = strips.shape[0], strips.shape[1]
-    flat = pa.array(np.ascontiguousarray(strips, dtype=np.float32).reshape(-1))
+    flat = pa.array(np.ascontiguousarray(points, dtype=np.float32).reshape(-1))
     inner = pa.FixedSizeListArray.from_arrays(flat, type=_STRIP_TYPE.value_type)
-    offsets = pa.array(np.arange(k + 1, dtype=np.int32) * length)
-    return pa.ListArray.from_arrays(offsets, inner, type=_STRIP_TYPE)
+    offsets = np.zeros(len(lengths) + 1, dtype=np.int32)
+    np.cumsum(lengths, out=offsets[1:])
+    return pa.ListArray.from_arrays(pa.array(offsets), inner, type=_STRIP_TYPE)
+
+
+def _load_kernels() -> None:
+    """Import and load the compiled batch kernels now (about 1 s the first time in a process),
+    so that the first batch of a run does not wait for them."""
+    from recorder.rerun_batch import contact_arrows, outlines
+
+    outlines(np.zeros((1, 1)), np.zeros((1, 1, 2)), np.zeros(1, dtype=np.int64),
+             np.zeros((1, 2, 2)), np.ones(1, dtype=np.int64))
+    z2 = np.zeros((1, 2))
+    contact_arrows(np.ones(1, dtype=np.int64), z2, z2, np.zeros(1), z2, z2, 1.0, 1.0)
 
 
 class RerunLogWriter:
@@ -107,7 +119,9 @@ class RerunLogWriter:
         v_max = local.shape[1] if local.ndim == 3 else 0
         idx = _closed_strip_index(counts, v_max)
         n = len(self.names)
-        # (n, v_max + 1, 2) closed outlines in the body frame
+        self.vertices_local = np.ascontiguousarray(local, dtype=np.float64)
+        self.vertex_count = np.ascontiguousarray(counts, dtype=np.int64)
+        # (n, v_max + 1, 2) closed outlines in the body frame (for the static concrete ones)
         self.outline_local = local[np.arange(n)[:, None], idx] if n else np.zeros((0, 1, 2))
         self._local_complex = self.outline_local[:, :, 0] + 1j * self.outline_local[:, :, 1]
         self.concrete = np.asarray(model.concrete, dtype=bool)
@@ -121,6 +135,7 @@ class RerunLogWriter:
         self._last_labels_key: bytes | None = None
         self._moving_key: bytes | None = None
         self._reset()
+        _load_kernels()
 
         self.rec = rr.RecordingStream(APP_ID, recording_id=f"isaac-{scene.name}")
         self.rec.save(self.partial_path)
@@ -152,14 +167,14 @@ class RerunLogWriter:
         self._moving: list[np.ndarray] = []  # moving bodies' indices per step (shared)
         self._stat_dicts: list[dict] = []
 
-    def _batch_strips(self) -> tuple[np.ndarray, list[int]]:
-        """(sum k, v_max + 1, 2) float32 outlines of the buffered steps and k per step, one
-        compiled pass per run of steps with the same moving bodies."""
+    def _batch_strips(self) -> tuple[np.ndarray, np.ndarray, list[int]]:
+        """Closed float32 outlines of the buffered steps: their points (one strip after the
+        other, no padding), the points per strip, and the strips per step; one compiled pass per
+        run of steps with the same moving bodies."""
         from recorder.rerun_batch import outlines
 
         recs, moving = self._records, self._moving
-        out = []
-        counts = []
+        points, lengths, counts = [], [], []
         i = 0
         while i < len(recs):
             idx = moving[i]
@@ -170,11 +185,13 @@ class RerunLogWriter:
             if idx.size:
                 angle = np.stack([r.angle for r in recs[i:j]])
                 position = np.stack([r.position for r in recs[i:j]])
-                out.append(outlines(angle, position, idx, self.outline_local))
+                points.append(outlines(angle, position, idx, self.vertices_local,
+                                       self.vertex_count))
+                lengths.append(np.tile(self.vertex_count[idx] + 1, j - i))
             i = j
-        v_len = self.outline_local.shape[1]
-        strips = np.concatenate(out) if out else np.zeros((0, v_len, 2), dtype=np.float32)
-        return strips, counts
+        if not points:
+            return _EMPTY2, np.zeros(0, dtype=np.int64), counts
+        return np.concatenate(points), np.concatenate(lengths), counts
 
     def _outlines(self, record: StepRecord, mask: np.ndarray) -> np.ndarray:
         """(k, v_max + 1, 2) float32 world outlines of the bodies in ``mask``:
@@ -238,10 +255,10 @@ class RerunLogWriter:
         rec = self.rec
         times = [rr.TimeColumn("step", sequence=self._steps),
                  rr.TimeColumn("sim_time", duration=self._times)]
-        strips, strip_counts = self._batch_strips()
+        points, lengths, strip_counts = self._batch_strips()
         rec.send_columns("world/bodies/moving", indexes=times,
-                         columns=rr.LineStrips2D.columns(strips=_strips_arrow(strips)).partition(
-                             strip_counts))
+                         columns=rr.LineStrips2D.columns(
+                             strips=_strips_arrow(points, lengths)).partition(strip_counts))
         contacts = [r.contacts for r in self._records]
         counts = [len(c) for c in contacts]
         n_steps = len(counts)
@@ -275,6 +292,11 @@ class RerunLogWriter:
                 rec.send_columns(f"stats/{k}", indexes=times,
                                  columns=rr.Scalars.columns(scalars=values))
         self._reset()
+
+    def settle(self) -> None:
+        """Wait until the data already sent (whole batches) is written to the file; the steps
+        of the open batch stay buffered."""
+        self.rec.flush()
 
     def close(self, *, complete: bool = True, stopped_at: int | None = None,
               reason: str | None = None) -> str:

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from isaac.errors import LogError, SimulationError
-from isaac.records import Contacts, StepRecord
+from isaac.records import Contacts, StepRecord, state_hash
 from recorder import Recorder
 from recorder import writer_process as W
 from recorder.reader import LogReader
@@ -39,29 +39,46 @@ def _assert_same_record(a: StepRecord, b: StepRecord):
         np.testing.assert_array_equal(x, y)
 
 
-def test_a_frame_packed_by_the_compiled_copy_unpacks_to_the_same_record_and_stats():
-    sim, records = _records(steps=30)
-    ring = np.zeros(1 << 20, dtype=np.uint8)
-    proc = W.WriterProcess.__new__(W.WriterProcess)  # only the packing half, no child
+def _packer(ring, sim):
+    """A WriterProcess's packing half, without a child."""
+    proc = W.WriterProcess.__new__(W.WriterProcess)
     proc._view = memoryview(ring)
-    proc._ring_f8, proc._ring_i4, proc._ring_u8 = (ring.view(np.float64), ring.view(np.int32),
-                                                   ring)
+    proc._ring_u8 = ring
+    proc._stats_model = W._Namespace(mass=np.asarray(sim.model.mass, dtype=float),
+                                     inertia=np.asarray(sim.model.inertia, dtype=float),
+                                     concrete=np.asarray(sim.model.concrete, dtype=bool))
+    proc._gravity = (0.0, -9.81)
+    return proc
+
+
+def test_the_compiled_encoder_writes_the_reference_encoders_bytes_and_stats():
+    from recorder.mcap_writer import encode_bodies, encode_contacts
+
+    sim, records = _records(steps=30, leave_at=20)
+    ring = np.zeros(1 << 20, dtype=np.uint8)
+    proc = _packer(ring, sim)
+    assert any(len(r.contacts) == 0 for r in records)  # step 0: empty fields left out
     for r in records:
         stats = compute_stats(sim.model, (0.0, -9.81), r, with_hash=False)
         size = W.frame_size(r)
-        assert proc._compiled_pack(8, r, stats) == -1
+        assert proc._compiled_pack(8, r, None)
         frame = bytes(ring[8:8 + size])
-        assert frame == W.pack(r, stats)  # compiled and Python packing agree byte for byte
-        back, back_stats = W.unpack(frame)
-        _assert_same_record(back, r)
-        for k in W.STAT_KEYS:
-            assert back_stats[k] == stats[k]
+        assert frame == W.pack(r, stats)  # compiled and reference encoding agree byte for byte
+        got = W.Frame(frame)
+        assert bytes(got.bodies) == encode_bodies(r)
+        assert bytes(got.contacts) == encode_contacts(r)
+        assert got.stats == stats  # the same kernel, the same sums
+        assert got.state_hash() == state_hash(r)
+        np.testing.assert_array_equal(got.exists(), r.exists)
+        _assert_same_record(got.record(), r)
 
 
 @pytest.mark.parametrize("field", ["position", "angular_velocity", "normal", "impulse",
                                    "restitution"])
 @pytest.mark.parametrize("bad", [np.nan, np.inf])
-def test_the_compiled_copy_refuses_a_nan_or_infinity_in_any_float_field(field, bad):
+def test_the_compiled_encoder_refuses_a_nan_or_infinity_in_any_float_field(field, bad):
+    from recorder.pack import BODY_FIELDS, CONTACT_FIELDS, pack_layout
+
     sim, records = _records(steps=3)
     r = records[-1]
     if hasattr(r, field):
@@ -73,13 +90,15 @@ def test_the_compiled_copy_refuses_a_nan_or_infinity_in_any_float_field(field, b
         arr.flat[0] = bad
         r = dataclasses.replace(r, contacts=dataclasses.replace(r.contacts, **{field: arr}))
     ring = np.zeros(1 << 20, dtype=np.uint8)
-    proc = W.WriterProcess.__new__(W.WriterProcess)
-    proc._view = memoryview(ring)
-    proc._ring_f8, proc._ring_i4, proc._ring_u8 = (ring.view(np.float64), ring.view(np.int32),
-                                                   ring)
-    stats = compute_stats(sim.model, (0.0, -9.81), records[-2], with_hash=False)
-    order = [f for f, _, _ in W._BODY_FIELDS + W._CONTACT_FIELDS]
-    assert proc._compiled_pack(0, r, stats) == order.index(field)
+    assert not _packer(ring, sim)._compiled_pack(0, r, None)
+    c = r.contacts
+    bad_field = pack_layout(ring, 64, 3, 0.05, len(r.angle), len(c), 4096, r.position, r.angle,
+                            r.velocity, r.angular_velocity, r.exists, c.point, c.normal,
+                            c.depth, c.push_a, c.push_b, c.impulse, c.tangent_impulse,
+                            c.restitution, np.asarray(sim.model.mass, dtype=float),
+                            np.asarray(sim.model.inertia, dtype=float),
+                            np.asarray(sim.model.concrete, dtype=bool), 0.0, -9.81)[0]
+    assert bad_field == (BODY_FIELDS + CONTACT_FIELDS).index(field)
 
 
 @pytest.mark.parametrize("ring_bytes", [None, 64 * 1024])  # the second forces wraps and waits
@@ -102,7 +121,7 @@ def test_writer_processes_write_the_same_bytes_as_writing_in_process(tmp_path, r
 
 def _mcap_config(rec):
     from recorder.mcap_writer import build_metadata
-    return {"model": W.model_table(rec.model),
+    return {"model": W.model_table(rec.model), "gravity": rec.gravity,
             "scene": {"name": str(rec.scene.name), "dt": float(rec.scene.world.dt)},
             "scene_text": rec.scene_text,
             "metadata": build_metadata(rec.scene, rec.scene_text, len(rec.model.names)),
@@ -174,15 +193,6 @@ def test_a_failure_inside_the_writer_process_comes_back_as_its_message(tmp_path)
     proc.abandon()
 
 
-def test_the_writer_process_starts_without_the_compiled_kernels():
-    import subprocess
-    out = subprocess.run(
-        [sys.executable, "-c", "import sys, recorder.writer_process, recorder.mcap_writer, "
-         "recorder.rerun_writer; print('numba' in sys.modules)"],
-        capture_output=True, text=True, check=True)
-    assert out.stdout.strip() == "False"
-
-
 def test_drain_returns_once_every_step_is_written(tmp_path):
     sim, records = _records(steps=50)
     path = tmp_path / "d.mcap"
@@ -193,3 +203,19 @@ def test_drain_returns_once_every_step_is_written(tmp_path):
     steps = [s.step for s in LogReader(str(path) + ".partial").steps()]
     assert steps == list(range(40))  # chunks closed after steps 0, 9, ..., 39
     rec.close()
+
+
+@pytest.mark.skipif(len(os.sched_getaffinity(0)) < 2, reason="needs two CPUs")
+def test_writer_processes_get_cpus_of_their_own_until_the_recorder_closes(tmp_path):
+    sim, records = _records(steps=5)
+    before = os.sched_getaffinity(0)
+    rec = Recorder(sim, mcap_path=str(tmp_path / "a.mcap"), rrd_path=str(tmp_path / "a.rrd"),
+                   scene_text=SCENE_TEXT)
+    mine = os.sched_getaffinity(0)
+    theirs = [os.sched_getaffinity(w.proc.pid) for w in (rec.mcap, rec.rerun)]
+    assert all(t and not (t & mine) for t in theirs)  # apart from the simulation's CPUs
+    assert mine | set().union(*theirs) == before
+    for r in records:
+        rec.write(r)
+    rec.close()
+    assert os.sched_getaffinity(0) == before
