@@ -45,14 +45,14 @@ import time
 import numpy as np
 
 from isaac.errors import LogError
-from isaac.records import StepRecord
+from isaac.records import Contacts, StepRecord
 
 # shared memory per writer, in frames of the scene's size, within RING_MIN..RING_MAX bytes,
 # mapped pre-faulted (a fresh page costs a fault in each process: writes over a cold 32 MiB
-# ring measured 3x slower). The MCAP writer takes each step as it comes: 16 frames, small
-# enough to stay in the last-level cache. The Rerun writer sends a batch of 100 steps at once
+# ring measured 3x slower). The MCAP writer takes each step as it comes; 64 frames ride out
+# its hiccups on a shared machine. The Rerun writer sends a batch of 100 steps at once
 # (10-30 ms on the 500-body pile) and the run goes on meanwhile: 128 frames.
-RING_FRAMES = {"mcap": 16, "rerun": 128}
+RING_FRAMES = {"mcap": 64, "rerun": 128}
 RING_MIN, RING_MAX = 4 << 20, 64 << 20
 
 STAT_KEYS = ("kinetic_energy", "potential_energy", "total_energy", "linear_momentum_x",
@@ -117,23 +117,7 @@ class Frame:
         """The raw little-endian values of Bodies fields 3-7 (position, angle, velocity,
         angular velocity, exists), empty when left out."""
         if self._fields is None:
-            from recorder.schema import _read_varint
-
-            out = {}
-            buf = self.bodies
-            pos = 0
-            while pos < len(buf):
-                key, pos = _read_varint(buf, pos)
-                number, wire = key >> 3, key & 7
-                if wire == 0:
-                    _, pos = _read_varint(buf, pos)
-                elif wire == 1:
-                    pos += 8
-                else:
-                    length, pos = _read_varint(buf, pos)
-                    out[number] = buf[pos:pos + length]
-                    pos += length
-            self._fields = [out.get(k, memoryview(b"")) for k in (3, 4, 5, 6, 7)]
+            self._fields = _packed_fields(self.bodies, 5)
         return self._fields
 
     def state_hash(self) -> str:
@@ -149,12 +133,45 @@ class Frame:
                 else np.ones(self.n, dtype=bool))
 
     def record(self) -> StepRecord:
-        """The step as a StepRecord (decoded from the messages; arrays are read-only)."""
-        from recorder import schema as S
-        from recorder.reader import record_from_messages
+        """The step as a StepRecord (arrays are copies of the frame's values)."""
+        from recorder.pack import CONTACT_FIELDS
 
-        return record_from_messages(S.decode("Bodies", bytes(self.bodies)),
-                                    S.decode("Contacts", bytes(self.contacts)))
+        n, m = self.n, self.m
+        pos, ang, vel, angvel, flags = (bytes(f) for f in self.body_fields())
+        f8 = (lambda b, shape: np.frombuffer(b, dtype="<f8").reshape(shape) if b
+              else np.zeros(shape))
+        raw = dict(zip(CONTACT_FIELDS, (bytes(f) for f in _packed_fields(self.contacts, 13))))
+        i4 = (lambda k: np.frombuffer(raw[k], dtype="<i4") if raw[k] else np.zeros(m, np.int32))
+        c = {k: i4(k) for k in CONTACT_FIELDS[:5]}
+        for k in CONTACT_FIELDS[5:]:
+            c[k] = f8(raw[k], (m, 2) if k in ("point", "normal", "push_a", "push_b") else (m,))
+        return StepRecord(
+            step=self.step, time=self.time, position=f8(pos, (n, 2)), angle=f8(ang, (n,)),
+            velocity=f8(vel, (n, 2)), angular_velocity=f8(angvel, (n,)),
+            exists=np.frombuffer(flags, dtype=np.bool_) if flags else np.ones(n, dtype=bool),
+            contacts=Contacts(**c))
+
+
+def _packed_fields(buf, count: int) -> list[memoryview]:
+    """The payloads of fields 3 .. count + 2 of an encoded Bodies or Contacts message (their
+    packed values), empty when left out."""
+    from recorder.schema import _read_varint
+
+    out = {}
+    pos = 0
+    while pos < len(buf):
+        key, pos = _read_varint(buf, pos)
+        number, wire = key >> 3, key & 7
+        if wire == 0:
+            _, pos = _read_varint(buf, pos)
+        elif wire == 1:
+            pos += 8
+        else:
+            length, pos = _read_varint(buf, pos)
+            out[number] = buf[pos:pos + length]
+            pos += length
+    empty = memoryview(b"")
+    return [out.get(k, empty) for k in range(3, count + 3)]
 
 
 def model_table(model) -> dict:
