@@ -133,28 +133,36 @@ class Frame:
                 else np.ones(self.n, dtype=bool))
 
     def record(self) -> StepRecord:
-        """The step as a StepRecord (arrays are copies of the frame's values)."""
+        """The step as a StepRecord: read-only views of one copy of the frame's values."""
         from recorder.pack import CONTACT_FIELDS
 
         n, m = self.n, self.m
-        pos, ang, vel, angvel, flags = (bytes(f) for f in self.body_fields())
-        f8 = (lambda b, shape: np.frombuffer(b, dtype="<f8").reshape(shape) if b
-              else np.zeros(shape))
-        raw = dict(zip(CONTACT_FIELDS, (bytes(f) for f in _packed_fields(self.contacts, 13))))
-        i4 = (lambda k: np.frombuffer(raw[k], dtype="<i4") if raw[k] else np.zeros(m, np.int32))
-        c = {k: i4(k) for k in CONTACT_FIELDS[:5]}
-        for k in CONTACT_FIELDS[5:]:
-            c[k] = f8(raw[k], (m, 2) if k in ("point", "normal", "push_a", "push_b") else (m,))
-        return StepRecord(
-            step=self.step, time=self.time, position=f8(pos, (n, 2)), angle=f8(ang, (n,)),
-            velocity=f8(vel, (n, 2)), angular_velocity=f8(angvel, (n,)),
-            exists=np.frombuffer(flags, dtype=np.bool_) if flags else np.ones(n, dtype=bool),
-            contacts=Contacts(**c))
+        data = bytes(self.bodies) + bytes(self.contacts)  # one copy: the ring slot is reused
+        base = len(self.bodies)
+        spans = (_field_spans(self.bodies, 5)
+                 + [(start + base, size) for start, size in _field_spans(self.contacts, 13)])
+
+        def values(k, dtype, shape):
+            start, size = spans[k]
+            if not size:
+                return np.zeros(shape, dtype=dtype)
+            return np.frombuffer(data, dtype=dtype, count=size // np.dtype(dtype).itemsize,
+                                 offset=start).reshape(shape)
+
+        exists = values(4, np.bool_, (n,)) if spans[4][1] else np.ones(n, dtype=bool)
+        c = {}
+        for j, name in enumerate(CONTACT_FIELDS):
+            pair = name in ("point", "normal", "push_a", "push_b")
+            c[name] = values(5 + j, "<i4" if j < 5 else "<f8", (m, 2) if pair else (m,))
+        return StepRecord(step=self.step, time=self.time, position=values(0, "<f8", (n, 2)),
+                          angle=values(1, "<f8", (n,)), velocity=values(2, "<f8", (n, 2)),
+                          angular_velocity=values(3, "<f8", (n,)), exists=exists,
+                          contacts=Contacts(**c))
 
 
-def _packed_fields(buf, count: int) -> list[memoryview]:
-    """The payloads of fields 3 .. count + 2 of an encoded Bodies or Contacts message (their
-    packed values), empty when left out."""
+def _field_spans(buf, count: int) -> list[tuple[int, int]]:
+    """(start, bytes) of the payloads of fields 3 .. count + 2 of an encoded Bodies or
+    Contacts message (their packed values), (0, 0) when left out."""
     from recorder.schema import _read_varint
 
     out = {}
@@ -168,10 +176,14 @@ def _packed_fields(buf, count: int) -> list[memoryview]:
             pos += 8
         else:
             length, pos = _read_varint(buf, pos)
-            out[number] = buf[pos:pos + length]
+            out[number] = (pos, length)
             pos += length
-    empty = memoryview(b"")
-    return [out.get(k, empty) for k in range(3, count + 3)]
+    return [out.get(k, (0, 0)) for k in range(3, count + 3)]
+
+
+def _packed_fields(buf, count: int) -> list[memoryview]:
+    """The payloads of fields 3 .. count + 2 of an encoded message, empty when left out."""
+    return [buf[start:start + size] for start, size in _field_spans(buf, count)]
 
 
 def model_table(model) -> dict:
