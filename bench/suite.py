@@ -215,7 +215,7 @@ def startup(engines: list[str], reps: int) -> list[dict]:
 # ---- recording ------------------------------------------------------------------------------
 
 # the recording issue's scenes: the 500-body and the 2,000-body pile (steps timed)
-RECORDING_SCENES = (("pile-500", 300), ("pile-2000", 120))
+RECORDING_SCENES = (("pile-500", 400), ("pile-2000", 200))
 
 
 def recording(preset: str, reps: int, steps: int, scene: str) -> dict:
