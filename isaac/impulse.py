@@ -55,25 +55,20 @@ def combine(rule, x, y):
     return np.sqrt(x * y)
 
 
-# Columns of the per-row table built once per solve. It holds only what the iterations read
-# (13 float64, 104 bytes a row) so that a large scene's table stays in cache across iterations;
-# inverse masses are read from a packed per-body table instead.
-NX, NY, RNA, RNB, RTA, RTB, MN, MT, TARGET, MU, KN, KT, BLOCK = range(13)
-COLUMNS = 13
-# per two-point manifold (on its slot-0 row): K12 and the inverse of K
-K12, NM11, NM12, NM22 = range(4)
+# Columns of the seed solver's per-row table.
+NX, NY, RNA, RNB, RTA, RTB, MN, MT, TARGET, MU, KN, KT = range(12)
+COLUMNS = 12
 # a manifold is solved as a 2x2 block only while K is well conditioned (Box2D's
 # b2_maxConditionNumber): k11^2 < MAX_CONDITION * det(K); otherwise point by point
 MAX_CONDITION = 1000.0
 
 
-@numba.njit(cache=True, nogil=True)
 def solve_contacts(rows, c_a, c_b, c_feature, c_slot, c_point, c_normal, c_depth, c_previous,
                    position, velocity, angular_velocity, inv_mass, inv_inertia, gravity_dv,
                    restitution, friction, restitution_rule, friction_rule, restitution_threshold,
                    friction_on, seed_solver, iterations, warm_starting, h,
                    prev_impulse, prev_tangent, c_impulse, c_tangent, c_restitution,
-                   c_push_a, c_push_b):
+                   c_push_a, c_push_b, table):
     """Resolve every contact row; writes the impulses applied (N s) and the restitution used.
 
     gravity_dv: (2,) velocity (m/s) gravity added to every moving body just before this solve
@@ -88,8 +83,31 @@ def solve_contacts(rows, c_a, c_b, c_feature, c_slot, c_point, c_normal, c_depth
     in the air g above it. That displacement is added to the pair's push_a / push_b. (With
     semi-implicit Euler this keeps an e = 1 bounce's energy within 0.5 % over 60 s; reflecting
     the arrival velocity at the mirrored position lost 23 %.)
-    Velocities are worked on as a packed copy (vx, vy, w) per body and written back at the end.
+    table: (m,) float64 scratch for the sequential solver, kept by the caller from step to step
+    (allocating its several hundred kB afresh every step cost more in page faults than the
+    passes over it); returns it, or a larger replacement when it was too small.
+
+    The two solvers are separate compiled kernels chosen here, so each is compiled only when a
+    run first uses it.
     """
+    if seed_solver:
+        _solve_seed(rows, c_a, c_b, c_feature, c_slot, c_point, c_normal, c_depth, position,
+                    velocity, angular_velocity, inv_mass, inv_inertia, gravity_dv, restitution,
+                    friction, restitution_rule, friction_rule, restitution_threshold,
+                    friction_on, h, c_impulse, c_tangent, c_restitution, c_push_a, c_push_b)
+        return table
+    return _solve_sequential(rows, c_a, c_b, c_feature, c_slot, c_point, c_normal, c_depth,
+                             c_previous, position, velocity, angular_velocity, inv_mass,
+                             inv_inertia, gravity_dv, restitution, friction, restitution_rule,
+                             friction_rule, restitution_threshold, friction_on, iterations,
+                             warm_starting, h, prev_impulse, prev_tangent, c_impulse,
+                             c_tangent, c_restitution, c_push_a, c_push_b, table)
+
+
+@numba.njit(cache=True, nogil=True)
+def _packed(velocity, angular_velocity, inv_mass, inv_inertia):
+    """The velocities (vx, vy, w) and the inverse masses and inertias, packed per body: the
+    solvers work on these and write the velocities back at the end (_finish)."""
     n = velocity.shape[0]
     v = np.empty((n, 3))
     inv = np.empty((n, 2))
@@ -99,28 +117,41 @@ def solve_contacts(rows, c_a, c_b, c_feature, c_slot, c_point, c_normal, c_depth
         v[i, 2] = angular_velocity[i]
         inv[i, 0] = inv_mass[i]
         inv[i, 1] = inv_inertia[i]
-    rc = np.empty((rows, COLUMNS))
+    return v, inv
+
+
+@numba.njit(cache=True, nogil=True)
+def _finish(rows, c_a, c_b, c_feature, c_slot, c_point, c_normal, bounce_back, inv, v,
+            position, velocity, angular_velocity, c_push_a, c_push_b):
+    """Write the packed velocities back and move the speculative contacts that bounced."""
+    for i in range(v.shape[0]):
+        velocity[i, 0] = v[i, 0]
+        velocity[i, 1] = v[i, 1]
+        angular_velocity[i] = v[i, 2]
+    _bounce_back(rows, c_a, c_b, c_feature, c_slot, c_point, c_normal, bounce_back, inv,
+                 position, c_push_a, c_push_b)
+
+
+@numba.njit(cache=True, nogil=True)
+def _solve_seed(rows, c_a, c_b, c_feature, c_slot, c_point, c_normal, c_depth, position,
+                velocity, angular_velocity, inv_mass, inv_inertia, gravity_dv, restitution,
+                friction, restitution_rule, friction_rule, restitution_threshold, friction_on, h,
+                c_impulse, c_tangent, c_restitution, c_push_a, c_push_b):
+    """solve_contacts with the seed's solver (_seed_pass)."""
+    v, inv = _packed(velocity, angular_velocity, inv_mass, inv_inertia)
     bounce_back = np.zeros(rows)  # (1 + e u_b / u) g of speculative rows that bounce (m)
+    rc = np.empty((rows, COLUMNS))
     for k in range(rows):
         a = c_a[k]
         b = c_b[k]
         nx = c_normal[k, 0]
         ny = c_normal[k, 1]
-        rax = c_point[k, 0] - position[a, 0]
-        ray = c_point[k, 1] - position[a, 1]
-        rbx = c_point[k, 0] - position[b, 0]
-        rby = c_point[k, 1] - position[b, 1]
-        rna = rax * ny - ray * nx  # r_ap x n
-        rnb = rbx * ny - rby * nx
-        rta = rax * nx + ray * ny  # r_ap x t, t = (-n_y, n_x)
-        rtb = rbx * nx + rby * ny
-        ima = inv[a, 0]
-        imb = inv[b, 0]
-        iia = inv[a, 1]
-        iib = inv[b, 1]
-        # the seed's denominator: 1/m_a + 1/m_b + (r_ap x n)^2 / I_a + (r_bp x n)^2 / I_b
-        kn = ima + imb + rna * rna * iia + rnb * rnb * iib
-        kt = ima + imb + rta * rta * iia + rtb * rtb * iib
+        rna, rnb, rta, rtb, kn, kt, mt, target, e, bounce = _row_terms(
+            nx, ny, c_point[k, 0], c_point[k, 1], position[a, 0], position[a, 1],
+            position[b, 0], position[b, 1], inv[a, 0], inv[a, 1], inv[b, 0], inv[b, 1],
+            v[a, 0], v[a, 1], v[a, 2], v[b, 0], v[b, 1], v[b, 2], c_depth[k],
+            restitution[a], restitution[b], gravity_dv[0], gravity_dv[1], restitution_rule,
+            restitution_threshold, h)
         rc[k, NX] = nx
         rc[k, NY] = ny
         rc[k, RNA] = rna
@@ -130,76 +161,71 @@ def solve_contacts(rows, c_a, c_b, c_feature, c_slot, c_point, c_normal, c_depth
         rc[k, KN] = kn
         rc[k, MN] = 1.0 / kn if kn > 0.0 else 0.0
         rc[k, KT] = kt
-        rc[k, MT] = 1.0 / kt if kt > 0.0 else 0.0
+        rc[k, MT] = mt
         rc[k, MU] = combine(friction_rule, friction[a], friction[b]) if friction_on else 0.0
-        rc[k, BLOCK] = 0.0
-        # v_ab . n: normal velocity of b's point relative to a's, (w x r) . n = w (r x n)
-        vn0 = ((v[b, 0] - v[a, 0]) * nx + (v[b, 1] - v[a, 1]) * ny
-               + v[b, 2] * rnb - v[a, 2] * rna)
-        # the approach velocity the pair arrived with: without this step's gravity, which moved
-        # each moving body by gravity_dv (no relative change between two moving bodies)
-        moved = (1.0 if imb > 0.0 else 0.0) - (1.0 if ima > 0.0 else 0.0)
-        arrived = vn0 - moved * (gravity_dv[0] * nx + gravity_dv[1] * ny)
-        gap = -c_depth[k]
-        hits = vn0 < 0.0 if gap <= 0.0 else vn0 * h < -gap
-        e = 0.0
-        if hits and arrived < 0.0 and -arrived >= restitution_threshold:
-            e = combine(restitution_rule, restitution[a], restitution[b])
+        rc[k, TARGET] = target
         c_restitution[k] = e
-        if gap <= 0.0:
-            rc[k, TARGET] = -e * arrived
-        elif hits and e > 0.0:
-            # it meets within this step, after this step's gravity: bounce with -e vn0 and
-            # move back by (1 + e) g, to where the reflection at the surface puts it
-            rc[k, TARGET] = -e * vn0
-            bounce_back[k] = (1.0 + e) * gap
-        else:
-            rc[k, TARGET] = -gap / h
+        bounce_back[k] = bounce
         c_impulse[k] = 0.0
         c_tangent[k] = 0.0
+    _seed_pass(rows, c_a, c_b, c_depth, rc, inv, v, c_restitution, c_impulse, c_tangent)
+    _finish(rows, c_a, c_b, c_feature, c_slot, c_point, c_normal, bounce_back, inv, v, position,
+            velocity, angular_velocity, c_push_a, c_push_b)
 
-    if seed_solver:
-        _seed_pass(rows, c_a, c_b, c_depth, rc, inv, v, c_restitution, c_impulse, c_tangent)
+
+# The per-row helpers take scalars only: an inlined helper that takes arrays costs an atomic
+# reference count update per array and call, several times the arithmetic here.
+
+
+@numba.njit(cache=True, nogil=True)
+def _arms(nx, ny, px, py, xa, ya, xb, yb):
+    """r x n and r x t (t = (-n_y, n_x)) of contact point p from a's and b's centres."""
+    rax = px - xa
+    ray = py - ya
+    rbx = px - xb
+    rby = py - yb
+    return rax * ny - ray * nx, rbx * ny - rby * nx, rax * nx + ray * ny, rbx * nx + rby * ny
+
+
+@numba.njit(cache=True, nogil=True)
+def _effective_mass(ima, iia, imb, iib, ra, rb):
+    """The seed's denominator 1/m_a + 1/m_b + (r_a x d)^2 / I_a + (r_b x d)^2 / I_b (1/kg)."""
+    return ima + imb + ra * ra * iia + rb * rb * iib
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _row_terms(nx, ny, px, py, xa, ya, xb, yb, ima, iia, imb, iib, vax, vay, wa, vbx, vby, wb,
+               depth, restitution_a, restitution_b, gdx, gdy, restitution_rule,
+               restitution_threshold, h):
+    """What the solver needs of one row: lever arms, k along the normal, k and 1/k along the
+    tangent, target normal velocity, restitution used and the bounce-back distance (m; 0 unless
+    a speculative row bounces)."""
+    rna, rnb, rta, rtb = _arms(nx, ny, px, py, xa, ya, xb, yb)
+    kn = _effective_mass(ima, iia, imb, iib, rna, rnb)
+    kt = _effective_mass(ima, iia, imb, iib, rta, rtb)
+    mt = 1.0 / kt if kt > 0.0 else 0.0
+    # v_ab . n: normal velocity of b's point relative to a's, (w x r) . n = w (r x n)
+    vn0 = (vbx - vax) * nx + (vby - vay) * ny + wb * rnb - wa * rna
+    # the approach velocity the pair arrived with: without this step's gravity, which moved
+    # each moving body by gravity_dv (no relative change between two moving bodies)
+    moved = (1.0 if imb > 0.0 else 0.0) - (1.0 if ima > 0.0 else 0.0)
+    arrived = vn0 - moved * (gdx * nx + gdy * ny)
+    gap = -depth
+    hits = vn0 < 0.0 if gap <= 0.0 else vn0 * h < -gap
+    e = 0.0
+    if hits and arrived < 0.0 and -arrived >= restitution_threshold:
+        e = combine(restitution_rule, restitution_a, restitution_b)
+    bounce = 0.0
+    if gap <= 0.0:
+        target = -e * arrived
+    elif hits and e > 0.0:
+        # it meets within this step, after this step's gravity: bounce with -e vn0 and
+        # move back by (1 + e) g, to where the reflection at the surface puts it
+        target = -e * vn0
+        bounce = (1.0 + e) * gap
     else:
-        # two-point manifolds: the 2x2 effective mass K of both points, for the block solver
-        blk = np.empty((rows, 4))
-        for k in range(rows - 1):
-            if c_slot[k] == 0 and c_slot[k + 1] == 1:
-                a = c_a[k]
-                b = c_b[k]
-                k11 = rc[k, KN]
-                k22 = rc[k + 1, KN]
-                k12 = (inv[a, 0] + inv[b, 0] + rc[k, RNA] * rc[k + 1, RNA] * inv[a, 1]
-                       + rc[k, RNB] * rc[k + 1, RNB] * inv[b, 1])
-                det = k11 * k22 - k12 * k12
-                if k11 * k11 < MAX_CONDITION * det:
-                    rc[k, BLOCK] = 1.0
-                    blk[k, K12] = k12
-                    blk[k, NM11] = k22 / det
-                    blk[k, NM12] = -k12 / det
-                    blk[k, NM22] = k11 / det
-        if warm_starting:
-            for k in range(rows):
-                p = c_previous[k]
-                if p >= 0:
-                    c_impulse[k] = prev_impulse[p]
-                    c_tangent[k] = prev_tangent[p] if rc[k, MU] > 0.0 else 0.0
-                    _apply(c_a[k], c_b[k], k, c_impulse[k], c_tangent[k], rc, inv, v)
-        # the solver's units (single points and two-point blocks, by their first row): contacts
-        # between moving bodies first, contacts with concrete bodies last, so every pass ends
-        # with the contacts that hold the world up satisfied (a blow on top of a stack no longer
-        # leaves the bottom body moving into the floor after the last pass)
-        starts = _solve_order(rows, c_a, c_b, rc, inv, n)
-        units = starts.shape[0]
-        for _ in range(iterations):
-            _sequential_pass(starts, units, c_a, c_b, rc, blk, inv, v, c_impulse, c_tangent)
-
-    for i in range(n):
-        velocity[i, 0] = v[i, 0]
-        velocity[i, 1] = v[i, 1]
-        angular_velocity[i] = v[i, 2]
-    _bounce_back(rows, c_a, c_b, c_feature, c_slot, c_point, c_normal, bounce_back, inv,
-                 position, c_push_a, c_push_b)
+        target = -gap / h
+    return rna, rnb, rta, rtb, kn, kt, mt, target, e, bounce
 
 
 @numba.njit(cache=True, nogil=True)
@@ -288,37 +314,102 @@ def _seed_pass(rows, c_a, c_b, c_depth, rc, inv, v, c_restitution, c_impulse, c_
             c_tangent[k] = jt
 
 
-@numba.njit(cache=True, nogil=True)
-def _solve_order(rows, c_a, c_b, rc, inv, n):
-    """The order the solver visits its units (single points and two-point blocks, by their
-    first row) in every pass.
+# ---- the sequential solver: several units at a time ---------------------------------------------
+#
+# Every pass visits the solver's units (single points and two-point blocks) in one fixed
+# Gauss-Seidel order (_schedule). Units that share no moving body do not affect each other, so the
+# order is cut into waves of mutually independent units, and each wave into groups of LANES units
+# of one kind, which are computed side by side: the group table holds each column of a group's
+# LANES units contiguously, and the per-unit code is a loop over the lanes that the compiler turns
+# into vector instructions. Each lane performs exactly the floating-point operations of its unit,
+# in the same order, so the results are the same bits as one unit at a time (only if-statements
+# became selects between values that are computed either way).
+#
+# The two bodies' velocities are kept in the group table too (VAX..WB): after a group has been
+# computed, each lane hands its bodies' new velocities straight to the velocity columns of the next
+# unit that touches the same body (its successor), rather than to a per-body array that the next
+# unit would gather from; a body's last unit hands them to its first unit, for the next pass.
+# Concrete bodies (inverse mass and inertia 0) never change velocity: their columns hold their
+# velocity throughout and what a lane computes for them is dropped (handed to a sink). Padding
+# lanes (a group's unused lanes) compute zeros into the sink.
 
-    The Gauss-Seidel order is: contacts between moving bodies first, contacts with concrete
-    bodies last, each group in (a, b) order, so every pass ends with the contacts that hold the
-    world up satisfied (a blow on top of a thin stack no longer leaves the bottom body moving
-    into the floor).
+LANES = 8
+UNIT_BLOCK = 0  # a two-point manifold solved as a 2x2 block
+UNIT_POINT = 1  # a single point
+# group table columns, each LANES wide: per row (a unit's first row, then at ROW2 its second):
+# normal, friction coefficient, r x t of a and b, 1 / k along the tangent, r x n of a and b,
+# target normal velocity, accumulated normal and tangent impulses, and R_K: k along the normal
+# (a block) or 1 / k (a point)
+R_NX, R_NY, R_MU, R_RTA, R_RTB, R_MT, R_RNA, R_RNB, R_TG, R_JN, R_JT, R_K = range(12)
+ROW2 = 12
+# then per unit: inverse masses and inertias, a block's K12 and K^-1, the velocities
+IMA, IIA, IMB, IIB, G12, GM11, GM12, GM22, VAX, VAY, WA, VBX, VBY, WB = range(24, 38)
+GROUP_COLUMNS = 38
+GROUP_WIDTH = GROUP_COLUMNS * LANES
+U_LANES = np.uint64(LANES)
+U_2LANES = np.uint64(2 * LANES)
+
+
+@numba.njit(cache=True, nogil=True)
+def _schedule(rows, c_a, c_b, c_slot, c_point, c_normal, position, inv, n):
+    """The solver's units in their Gauss-Seidel order, cut into groups of at most LANES
+    independent units of one kind.
+
+    A unit is a two-point manifold whose 2x2 effective mass K is well conditioned (a block,
+    by its first row), or a single row. The Gauss-Seidel order is: contacts between moving bodies
+    first, contacts with concrete bodies last, each in (a, b) order, so every pass ends with the
+    contacts that hold the world up satisfied (a blow on top of a thin stack no longer leaves the
+    bottom body moving into the floor).
 
     The units are then scheduled in waves without changing a single bit of the result: a unit's
     wave is one more than the last wave that touched either of its moving bodies, and units are
     visited wave by wave. Every unit still comes after each earlier unit it shares a body with
-    (the order of two units that share no moving body does not change what either computes), but
-    consecutive units now touch different bodies, so the processor overlaps them instead of
-    waiting for each unit's velocity stores. Concrete bodies never change velocity (their
-    inverse mass and inertia are 0) and do not tie units together.
+    (the order of two units that share no moving body does not change what either computes).
+    Concrete bodies never change velocity (their inverse mass and inertia are 0) and do not tie
+    units together. Each wave's blocks, then its points, are cut into groups of LANES units.
+    Returns (kind of each group, first row of each lane or -1 for padding, whether each row
+    is the first row of a block).
     determinism: the waves depend only on the rows, visited in index order.
     """
+    start = np.empty(rows, dtype=np.bool_)  # the first row of a unit
+    block = np.zeros(rows, dtype=np.bool_)  # the first row of a block
+    grounded = np.empty(rows, dtype=np.bool_)  # touches a concrete body
+    skip = False
+    for k in range(rows):
+        a = c_a[k]
+        b = c_b[k]
+        start[k] = not skip
+        grounded[k] = inv[a, 0] == 0.0 or inv[b, 0] == 0.0
+        skip = False
+        # (a slot-0 row always starts a unit)
+        if k + 1 < rows and c_slot[k] == 0 and c_slot[k + 1] == 1:
+            rna1, rnb1, _, _ = _arms(c_normal[k, 0], c_normal[k, 1], c_point[k, 0],
+                                     c_point[k, 1], position[a, 0], position[a, 1],
+                                     position[b, 0], position[b, 1])
+            k11 = _effective_mass(inv[a, 0], inv[a, 1], inv[b, 0], inv[b, 1], rna1, rnb1)
+            a2 = c_a[k + 1]
+            b2 = c_b[k + 1]
+            rna2, rnb2, _, _ = _arms(c_normal[k + 1, 0], c_normal[k + 1, 1], c_point[k + 1, 0],
+                                     c_point[k + 1, 1], position[a2, 0], position[a2, 1],
+                                     position[b2, 0], position[b2, 1])
+            k22 = _effective_mass(inv[a2, 0], inv[a2, 1], inv[b2, 0], inv[b2, 1], rna2, rnb2)
+            k12 = inv[a, 0] + inv[b, 0] + rna1 * rna2 * inv[a, 1] + rnb1 * rnb2 * inv[b, 1]
+            det = k11 * k22 - k12 * k12
+            if k11 * k11 < MAX_CONDITION * det:
+                block[k] = True
+                skip = True
     unit = np.empty(rows, dtype=np.int64)
     units = 0
-    for grounded in range(2):
-        k = 0
-        while k < rows:
-            touches_concrete = inv[c_a[k], 0] == 0.0 or inv[c_b[k], 0] == 0.0
-            if touches_concrete == (grounded == 1):
-                unit[units] = k
-                units += 1
-            k += 2 if rc[k, BLOCK] == 1.0 else 1
+    for k in range(rows):
+        if start[k] and not grounded[k]:
+            unit[units] = k
+            units += 1
+    for k in range(rows):
+        if start[k] and grounded[k]:
+            unit[units] = k
+            units += 1
     last = np.zeros(n, dtype=np.int64)
-    wave = np.empty(units, dtype=np.int64)
+    slot = np.empty(units, dtype=np.int64)  # 2 wave + kind
     waves = 0
     for u in range(units):
         k = unit[u]
@@ -331,144 +422,439 @@ def _solve_order(rows, c_a, c_b, rc, inv, n):
             w = last[a]
         if moving_b:
             w = max(w, last[b])
-        wave[u] = w
         if moving_a:
             last[a] = w + 1
         if moving_b:
             last[b] = w + 1
         waves = max(waves, w + 1)
-    # stable counting sort by wave
-    count = np.zeros(waves + 1, dtype=np.int64)
+        slot[u] = 2 * w + (UNIT_BLOCK if block[k] else UNIT_POINT)
+    # groups per (wave, kind), in wave order, blocks before points
+    count = np.zeros(2 * waves, dtype=np.int64)
     for u in range(units):
-        count[wave[u] + 1] += 1
-    for w in range(waves):
-        count[w + 1] += count[w]
-    order = np.empty(units, dtype=np.int64)
+        count[slot[u]] += 1
+    first = np.empty(2 * waves, dtype=np.int64)
+    groups = 0
+    for s in range(2 * waves):
+        first[s] = groups
+        groups += (count[s] + LANES - 1) // LANES
+    kind = np.empty(groups, dtype=np.int64)
+    for s in range(2 * waves):
+        for g in range(first[s], first[s] + (count[s] + LANES - 1) // LANES):
+            kind[g] = s % 2
+    lane_row = np.full(groups * LANES, -1, dtype=np.int64)
+    filled = np.zeros(2 * waves, dtype=np.int64)
     for u in range(units):
-        order[count[wave[u]]] = unit[u]
-        count[wave[u]] += 1
-    return order
+        s = slot[u]
+        lane_row[first[s] * LANES + filled[s]] = unit[u]
+        filled[s] += 1
+    return kind, lane_row, block
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy")
+def _passes(t, kind, successor, groups, iterations):
+    """`iterations` Gauss-Seidel passes over the groups of table t; each group's lanes are
+    computed side by side (the loops over the lanes are vectorised by the compiler), then hand
+    their bodies' velocities on to their successors.
+
+    (The per-kind code is written out here rather than in inlined helpers: inlining them cost
+    seconds of compile time. error_model="numpy": k11, k22 > 0 in a block, and a division then
+    needs no zero check, which would keep the loops from being vectorised.)
+    """
+    for _ in range(iterations):
+        for g in range(groups):
+            base = g * GROUP_WIDTH
+            if kind[g] == UNIT_BLOCK:
+                # One pass over a group of two-point blocks, lane by lane (vectorised by the compiler).
+                #
+                # Per manifold, friction first (non-penetration matters more, so it is solved last), then both
+                # normal impulses at once as a 2x2 linear complementarity problem (Box2D's block solver): find
+                # x >= 0 with w = K x + b' >= 0 and x . w = 0, where b' = vn - target - K a and a the
+                # accumulated impulses: try both points active, then only the first, only the second, none
+                # (Box2D 2.x b2ContactSolver::SolveVelocityConstraints); if no case fits (degenerate) nothing
+                # changes. Every case is computed and the first that fits is selected, which gives the same
+                # bits as trying them in turn. (error_model="numpy": k11, k22 > 0 in a block, and a division
+                # then needs no zero check, which would keep the loop from being vectorised.)
+                #
+                for j in range(LANES):
+                    vax = t[base + VAX * LANES + j]
+                    vay = t[base + VAY * LANES + j]
+                    wa = t[base + WA * LANES + j]
+                    vbx = t[base + VBX * LANES + j]
+                    vby = t[base + VBY * LANES + j]
+                    wb = t[base + WB * LANES + j]
+                    ima = t[base + IMA * LANES + j]
+                    iia = t[base + IIA * LANES + j]
+                    imb = t[base + IMB * LANES + j]
+                    iib = t[base + IIB * LANES + j]
+                    # friction of each point; tangent t = (-n_y, n_x); Coulomb: |jt| <= mu j
+                    mu = t[base + R_MU * LANES + j]
+                    nx = t[base + R_NX * LANES + j]
+                    ny = t[base + R_NY * LANES + j]
+                    rta = t[base + R_RTA * LANES + j]
+                    rtb = t[base + R_RTB * LANES + j]
+                    vt = -(vbx - vax) * ny + (vby - vay) * nx + wb * rtb - wa * rta
+                    limit = mu * t[base + R_JN * LANES + j]
+                    old = t[base + R_JT * LANES + j]
+                    new = min(max(old - vt * t[base + R_MT * LANES + j], -limit), limit)
+                    dt = new - old
+                    on = mu > 0.0
+                    t[base + R_JT * LANES + j] = new if on else old
+                    vax = vax + dt * ny * ima if on else vax
+                    vay = vay - dt * nx * ima if on else vay
+                    wa = wa - dt * rta * iia if on else wa
+                    vbx = vbx - dt * ny * imb if on else vbx
+                    vby = vby + dt * nx * imb if on else vby
+                    wb = wb + dt * rtb * iib if on else wb
+                    # (the second point)
+                    mu = t[base + (ROW2 + R_MU) * LANES + j]
+                    nx = t[base + (ROW2 + R_NX) * LANES + j]
+                    ny = t[base + (ROW2 + R_NY) * LANES + j]
+                    rta = t[base + (ROW2 + R_RTA) * LANES + j]
+                    rtb = t[base + (ROW2 + R_RTB) * LANES + j]
+                    vt = -(vbx - vax) * ny + (vby - vay) * nx + wb * rtb - wa * rta
+                    limit = mu * t[base + (ROW2 + R_JN) * LANES + j]
+                    old = t[base + (ROW2 + R_JT) * LANES + j]
+                    new = min(max(old - vt * t[base + (ROW2 + R_MT) * LANES + j], -limit), limit)
+                    dt = new - old
+                    on = mu > 0.0
+                    t[base + (ROW2 + R_JT) * LANES + j] = new if on else old
+                    vax = vax + dt * ny * ima if on else vax
+                    vay = vay - dt * nx * ima if on else vay
+                    wa = wa - dt * rta * iia if on else wa
+                    vbx = vbx - dt * ny * imb if on else vbx
+                    vby = vby + dt * nx * imb if on else vby
+                    wb = wb + dt * rtb * iib if on else wb
+                    # both normal impulses (along the first point's normal)
+                    nx = t[base + R_NX * LANES + j]
+                    ny = t[base + R_NY * LANES + j]
+                    rna1 = t[base + R_RNA * LANES + j]
+                    rnb1 = t[base + R_RNB * LANES + j]
+                    rna2 = t[base + (ROW2 + R_RNA) * LANES + j]
+                    rnb2 = t[base + (ROW2 + R_RNB) * LANES + j]
+                    k11 = t[base + R_K * LANES + j]
+                    k22 = t[base + (ROW2 + R_K) * LANES + j]
+                    k12 = t[base + G12 * LANES + j]
+                    a1 = t[base + R_JN * LANES + j]
+                    a2 = t[base + (ROW2 + R_JN) * LANES + j]
+                    dvx = vbx - vax
+                    dvy = vby - vay
+                    vn1 = dvx * nx + dvy * ny + wb * rnb1 - wa * rna1
+                    vn2 = dvx * nx + dvy * ny + wb * rnb2 - wa * rna2
+                    b1 = vn1 - t[base + R_TG * LANES + j] - (k11 * a1 + k12 * a2)
+                    b2 = vn2 - t[base + (ROW2 + R_TG) * LANES + j] - (k12 * a1 + k22 * a2)
+                    nm12 = t[base + GM12 * LANES + j]
+                    # both points active: x = -K^-1 b
+                    x1 = -(t[base + GM11 * LANES + j] * b1 + nm12 * b2)
+                    x2 = -(nm12 * b1 + t[base + GM22 * LANES + j] * b2)
+                    # only the first point active; only the second
+                    y1 = -b1 / k11
+                    z2 = -b2 / k22
+                    both = (x1 >= 0.0) & (x2 >= 0.0)
+                    only1 = (y1 >= 0.0) & (k12 * y1 + b2 >= 0.0)
+                    only2 = (z2 >= 0.0) & (k12 * z2 + b1 >= 0.0)
+                    neither = (b1 >= 0.0) & (b2 >= 0.0)
+                    n1 = x1 if both else (y1 if only1 else 0.0)
+                    n2 = x2 if both else (0.0 if only1 else (z2 if only2 else 0.0))
+                    fits = both | only1 | only2 | neither
+                    d1 = n1 - a1 if fits else 0.0
+                    d2 = n2 - a2 if fits else 0.0
+                    t[base + R_JN * LANES + j] = n1 if fits else a1
+                    t[base + (ROW2 + R_JN) * LANES + j] = n2 if fits else a2
+                    px = (d1 + d2) * nx
+                    py = (d1 + d2) * ny
+                    t[base + VAX * LANES + j] = vax - px * ima
+                    t[base + VAY * LANES + j] = vay - py * ima
+                    t[base + WA * LANES + j] = wa - (d1 * rna1 + d2 * rna2) * iia
+                    t[base + VBX * LANES + j] = vbx + px * imb
+                    t[base + VBY * LANES + j] = vby + py * imb
+                    t[base + WB * LANES + j] = wb + (d1 * rnb1 + d2 * rnb2) * iib
+            else:
+                # One pass over a group of single points, lane by lane: friction, then the normal impulse
+                # (Box2D-Lite's ApplyImpulse), accumulated and clamped to stay >= 0.
+                for j in range(LANES):
+                    vax = t[base + VAX * LANES + j]
+                    vay = t[base + VAY * LANES + j]
+                    wa = t[base + WA * LANES + j]
+                    vbx = t[base + VBX * LANES + j]
+                    vby = t[base + VBY * LANES + j]
+                    wb = t[base + WB * LANES + j]
+                    ima = t[base + IMA * LANES + j]
+                    iia = t[base + IIA * LANES + j]
+                    imb = t[base + IMB * LANES + j]
+                    iib = t[base + IIB * LANES + j]
+                    mu = t[base + R_MU * LANES + j]
+                    nx = t[base + R_NX * LANES + j]
+                    ny = t[base + R_NY * LANES + j]
+                    rta = t[base + R_RTA * LANES + j]
+                    rtb = t[base + R_RTB * LANES + j]
+                    vt = -(vbx - vax) * ny + (vby - vay) * nx + wb * rtb - wa * rta
+                    limit = mu * t[base + R_JN * LANES + j]
+                    old = t[base + R_JT * LANES + j]
+                    new = min(max(old - vt * t[base + R_MT * LANES + j], -limit), limit)
+                    dt = new - old
+                    on = mu > 0.0
+                    t[base + R_JT * LANES + j] = new if on else old
+                    vax = vax + dt * ny * ima if on else vax
+                    vay = vay - dt * nx * ima if on else vay
+                    wa = wa - dt * rta * iia if on else wa
+                    vbx = vbx - dt * ny * imb if on else vbx
+                    vby = vby + dt * nx * imb if on else vby
+                    wb = wb + dt * rtb * iib if on else wb
+                    rna = t[base + R_RNA * LANES + j]
+                    rnb = t[base + R_RNB * LANES + j]
+                    # (v_b + w_b x r_b - v_a - w_a x r_a) . n, using (w x r) . n = w (r x n)
+                    vn = (vbx - vax) * nx + (vby - vay) * ny + wb * rnb - wa * rna
+                    old = t[base + R_JN * LANES + j]
+                    new = max(old + (t[base + R_TG * LANES + j] - vn) * t[base + R_K * LANES + j], 0.0)
+                    t[base + R_JN * LANES + j] = new
+                    dj = new - old
+                    t[base + VAX * LANES + j] = vax - dj * nx * ima
+                    t[base + VAY * LANES + j] = vay - dj * ny * ima
+                    t[base + WA * LANES + j] = wa - dj * rna * iia
+                    t[base + VBX * LANES + j] = vbx + dj * nx * imb
+                    t[base + VBY * LANES + j] = vby + dj * ny * imb
+                    t[base + WB * LANES + j] = wb + dj * rnb * iib
+            # hand the velocities on (unsigned positions: no negative-index wrap-around)
+            for j in range(LANES):
+                at = base + VAX * LANES + j
+                to = successor[g * 2 * LANES + j]
+                t[to] = t[at]
+                t[to + U_LANES] = t[at + LANES]
+                t[to + U_2LANES] = t[at + 2 * LANES]
+                at = base + VBX * LANES + j
+                to = successor[g * 2 * LANES + LANES + j]
+                t[to] = t[at]
+                t[to + U_LANES] = t[at + LANES]
+                t[to + U_2LANES] = t[at + 2 * LANES]
 
 
 @numba.njit(cache=True, nogil=True)
-def _sequential_pass(starts, units, c_a, c_b, rc, blk, inv, v, c_impulse, c_tangent):
-    """One Gauss-Seidel pass of accumulated, clamped impulses.
+def _solve_sequential(rows, c_a, c_b, c_feature, c_slot, c_point, c_normal, c_depth,
+                      c_previous, position, velocity, angular_velocity, inv_mass, inv_inertia,
+                      gravity_dv, restitution, friction, restitution_rule, friction_rule,
+                      restitution_threshold, friction_on, iterations, warm_starting, h,
+                      prev_impulse, prev_tangent, c_impulse, c_tangent, c_restitution, c_push_a,
+                      c_push_b, table):
+    """solve_contacts with the sequential solver: accumulated, clamped impulses, warm started,
+    `iterations` Gauss-Seidel passes over every unit.
 
-    Per manifold, friction first (non-penetration matters more, so it is solved last), then the
-    normal impulses: point by point (Box2D-Lite's ApplyImpulse), or for a well-conditioned
-    two-point manifold both at once as a 2x2 linear complementarity problem (Box2D's block
-    solver), which makes resting stacks converge in far fewer iterations. The two bodies'
-    velocities are loaded once per manifold into locals and stored once.
+    Lays the group table of _schedule's groups out in `table` (or a larger one, returned) and
+    fills it with each row's terms, applies the warm-start impulses (last step's accumulated
+    impulses of the same contact points, in row order), runs the passes, and writes the
+    accumulated impulses to c_impulse / c_tangent. (Several small kernels rather than one: numba
+    compiles them in a fraction of the time.)
     """
-    for u in range(units):
-        k = starts[u]
+    v, inv = _packed(velocity, angular_velocity, inv_mass, inv_inertia)
+    kind, lane_row, block = _schedule(rows, c_a, c_b, c_slot, c_point, c_normal, position,
+                                      inv, v.shape[0])
+    groups = kind.shape[0]
+    if table.shape[0] < groups * GROUP_WIDTH + 3 * LANES:
+        table = np.empty(2 * (groups * GROUP_WIDTH + 3 * LANES))
+    where, successor, first, fixed, fixed_body = _layout(table, kind, lane_row, rows, c_a, c_b,
+                                                         inv)
+    bounce_back = np.zeros(rows)  # (1 + e u_b / u) g of speculative rows that bounce (m)
+    warm = _fill_rows(table, where, block, rows, c_a, c_b, c_point, c_normal, c_depth,
+                      c_previous, position, v, inv, gravity_dv, restitution, friction,
+                      restitution_rule, friction_rule, restitution_threshold, friction_on,
+                      warm_starting, h, prev_impulse, prev_tangent, c_restitution, bounce_back)
+    if warm_starting:
+        _warm_start(rows, c_a, c_b, c_previous, warm, inv, v)
+    _load_velocities(table, first, fixed, fixed_body, v)
+    _passes(table, kind, successor, groups, iterations)
+    _store_results(table, kind, lane_row, first, v, c_impulse, c_tangent)
+    _finish(rows, c_a, c_b, c_feature, c_slot, c_point, c_normal, bounce_back, inv, v, position,
+            velocity, angular_velocity, c_push_a, c_push_b)
+    return table
+
+
+@numba.njit(cache=True, nogil=True)
+def _layout(t, kind, lane_row, rows, c_a, c_b, inv):
+    """Where each row's columns go (where[k]: its column-0 position), each unit's inverse masses
+    and inertias, padding lanes zeroed, and the velocity hand-on: each lane side's successor
+    (the velocity columns of the next unit of the same moving body, the body's first unit for
+    its last; a sink for concrete bodies and padding), each moving body's first velocity
+    columns, and the concrete bodies' velocity columns (and bodies)."""
+    groups = kind.shape[0]
+    n = inv.shape[0]
+    sink = groups * GROUP_WIDTH  # three columns nothing reads
+    successor = np.empty(groups * 2 * LANES, dtype=np.uint64)
+    where = np.empty(rows, dtype=np.int64)
+    first = np.full(n, -1, dtype=np.int64)
+    last = np.empty(n, dtype=np.int64)  # the successor entry of a body's last unit so far
+    fixed = np.empty(groups * 2 * LANES, dtype=np.int64)
+    fixed_body = np.empty(groups * 2 * LANES, dtype=np.int64)
+    n_fixed = 0
+    for g in range(groups):
+        base = g * GROUP_WIDTH
+        for j in range(LANES):
+            k = lane_row[g * LANES + j]
+            if k < 0:
+                for c in range(GROUP_COLUMNS):
+                    t[base + c * LANES + j] = 0.0
+                t[base + R_K * LANES + j] = 1.0
+                t[base + (ROW2 + R_K) * LANES + j] = 1.0
+                successor[g * 2 * LANES + j] = sink
+                successor[g * 2 * LANES + LANES + j] = sink
+                continue
+            where[k] = base + j
+            if kind[g] == UNIT_BLOCK:
+                where[k + 1] = base + ROW2 * LANES + j
+            for side in range(2):
+                body = c_a[k] if side == 0 else c_b[k]
+                im = inv[body, 0]
+                ii = inv[body, 1]
+                t[base + (IMA + 2 * side) * LANES + j] = im
+                t[base + (IIA + 2 * side) * LANES + j] = ii
+                at = base + (VAX + 3 * side) * LANES + j
+                entry = g * 2 * LANES + side * LANES + j
+                if im > 0.0 or ii > 0.0:
+                    if first[body] < 0:
+                        first[body] = at
+                    else:
+                        successor[last[body]] = at
+                    last[body] = entry
+                else:
+                    successor[entry] = sink
+                    fixed[n_fixed] = at
+                    fixed_body[n_fixed] = body
+                    n_fixed += 1
+    for body in range(n):
+        if first[body] >= 0:
+            successor[last[body]] = first[body]  # the next pass
+    return where, successor, first, fixed[:n_fixed], fixed_body[:n_fixed]
+
+
+@numba.njit(cache=True, nogil=True)
+def _fill_rows(t, where, block, rows, c_a, c_b, c_point, c_normal, c_depth, c_previous,
+               position, v, inv, gravity_dv, restitution, friction, restitution_rule,
+               friction_rule, restitution_threshold, friction_on, warm_starting, h,
+               prev_impulse, prev_tangent, c_restitution, bounce_back):
+    """Each row's terms into its table columns, in row order, with a block's K12 and K^-1;
+    the restitution used and the bounce-back distances; and the warm-start impulse (last
+    step's accumulated impulses of the same contact point) as it will be applied: returns
+    (rows, 4) P = (px, py) and the torques r x P of a and b."""
+    warm = np.empty((rows, 4))
+    rna1 = 0.0
+    rnb1 = 0.0
+    kn1 = 0.0
+    mu_a = -1  # the pair whose friction coefficient mu is
+    mu_b = -1
+    mu = 0.0
+    for k in range(rows):
         a = c_a[k]
         b = c_b[k]
-        ima = inv[a, 0]
-        iia = inv[a, 1]
-        imb = inv[b, 0]
-        iib = inv[b, 1]
-        vax = v[a, 0]
-        vay = v[a, 1]
-        wa = v[a, 2]
-        vbx = v[b, 0]
-        vby = v[b, 1]
-        wb = v[b, 2]
-        last = k + 1 if rc[k, BLOCK] == 1.0 else k
-        for q in range(k, last + 1):
-            mu = rc[q, MU]
-            if mu > 0.0:
-                nx = rc[q, NX]
-                ny = rc[q, NY]
-                rta = rc[q, RTA]
-                rtb = rc[q, RTB]
-                # tangent t = (-n_y, n_x); Coulomb: |jt| <= mu j
-                vt = -(vbx - vax) * ny + (vby - vay) * nx + wb * rtb - wa * rta
-                limit = mu * c_impulse[q]
-                old = c_tangent[q]
-                new = min(max(old - vt * rc[q, MT], -limit), limit)
-                c_tangent[q] = new
-                dt = new - old
-                vax += dt * ny * ima
-                vay -= dt * nx * ima
-                wa -= dt * rta * iia
-                vbx -= dt * ny * imb
-                vby += dt * nx * imb
-                wb += dt * rtb * iib
-        nx = rc[k, NX]
-        ny = rc[k, NY]
-        if last == k:
-            rna = rc[k, RNA]
-            rnb = rc[k, RNB]
-            # (v_b + w_b x r_b - v_a - w_a x r_a) . n, using (w x r) . n = w (r x n)
-            vn = (vbx - vax) * nx + (vby - vay) * ny + wb * rnb - wa * rna
-            old = c_impulse[k]
-            new = max(old + (rc[k, TARGET] - vn) * rc[k, MN], 0.0)
-            c_impulse[k] = new
-            dj = new - old
-            vax -= dj * nx * ima
-            vay -= dj * ny * ima
-            wa -= dj * rna * iia
-            vbx += dj * nx * imb
-            vby += dj * ny * imb
-            wb += dj * rnb * iib
+        nx = c_normal[k, 0]
+        ny = c_normal[k, 1]
+        rna, rnb, rta, rtb, kn, kt, mt, target, e, bounce = _row_terms(
+            nx, ny, c_point[k, 0], c_point[k, 1], position[a, 0], position[a, 1],
+            position[b, 0], position[b, 1], inv[a, 0], inv[a, 1], inv[b, 0], inv[b, 1],
+            v[a, 0], v[a, 1], v[a, 2], v[b, 0], v[b, 1], v[b, 2], c_depth[k],
+            restitution[a], restitution[b], gravity_dv[0], gravity_dv[1], restitution_rule,
+            restitution_threshold, h)
+        if a != mu_a or b != mu_b:  # (consecutive rows are often one pair's)
+            mu = combine(friction_rule, friction[a], friction[b]) if friction_on else 0.0
+            mu_a = a
+            mu_b = b
+        c_restitution[k] = e
+        bounce_back[k] = bounce
+        jn = 0.0
+        jt = 0.0
+        p = c_previous[k]
+        if warm_starting and p >= 0:
+            jn = prev_impulse[p]
+            jt = prev_tangent[p] if mu > 0.0 else 0.0
+        warm[k, 0] = jn * nx - jt * ny
+        warm[k, 1] = jn * ny + jt * nx
+        warm[k, 2] = jn * rna + jt * rta
+        warm[k, 3] = jn * rnb + jt * rtb
+        second = k > 0 and block[k - 1]
+        at = where[k]
+        t[at + R_NX * LANES] = nx
+        t[at + R_NY * LANES] = ny
+        t[at + R_MU * LANES] = mu
+        t[at + R_RTA * LANES] = rta
+        t[at + R_RTB * LANES] = rtb
+        t[at + R_MT * LANES] = mt
+        t[at + R_RNA * LANES] = rna
+        t[at + R_RNB * LANES] = rnb
+        t[at + R_TG * LANES] = target
+        t[at + R_JN * LANES] = jn
+        t[at + R_JT * LANES] = jt
+        if block[k] or second:
+            t[at + R_K * LANES] = kn
         else:
-            d1, d2 = _block_normal(k, rc, blk, c_impulse, vax, vay, wa, vbx, vby, wb)
-            px = (d1 + d2) * nx
-            py = (d1 + d2) * ny
-            vax -= px * ima
-            vay -= py * ima
-            wa -= (d1 * rc[k, RNA] + d2 * rc[k + 1, RNA]) * iia
-            vbx += px * imb
-            vby += py * imb
-            wb += (d1 * rc[k, RNB] + d2 * rc[k + 1, RNB]) * iib
-        v[a, 0] = vax
-        v[a, 1] = vay
-        v[a, 2] = wa
-        v[b, 0] = vbx
-        v[b, 1] = vby
-        v[b, 2] = wb
+            t[at + R_K * LANES] = 1.0 / kn if kn > 0.0 else 0.0
+        if second:
+            # the block's 2x2 effective mass K of both points and its inverse
+            a = c_a[k - 1]
+            b = c_b[k - 1]
+            k12 = inv[a, 0] + inv[b, 0] + rna1 * rna * inv[a, 1] + rnb1 * rnb * inv[b, 1]
+            det = kn1 * kn - k12 * k12
+            at = where[k - 1]
+            t[at + G12 * LANES] = k12
+            t[at + GM11 * LANES] = kn / det
+            t[at + GM12 * LANES] = -k12 / det
+            t[at + GM22 * LANES] = kn1 / det
+        rna1 = rna
+        rnb1 = rnb
+        kn1 = kn
+    return warm
 
 
-@numba.njit(cache=True, nogil=True, inline="always")
-def _block_normal(k, rc, blk, c_impulse, vax, vay, wa, vbx, vby, wb):
-    """Both normal impulses of a two-point manifold (rows k, k + 1) as one 2x2 LCP.
+@numba.njit(cache=True, nogil=True)
+def _warm_start(rows, c_a, c_b, c_previous, warm, inv, v):
+    """Apply the warm-start impulses in row order: -P to a, +P to b."""
+    for k in range(rows):
+        if c_previous[k] < 0:
+            continue
+        a = c_a[k]
+        b = c_b[k]
+        px = warm[k, 0]
+        py = warm[k, 1]
+        v[a, 0] -= px * inv[a, 0]
+        v[a, 1] -= py * inv[a, 0]
+        v[a, 2] -= warm[k, 2] * inv[a, 1]
+        v[b, 0] += px * inv[b, 0]
+        v[b, 1] += py * inv[b, 0]
+        v[b, 2] += warm[k, 3] * inv[b, 1]
 
-    Find x >= 0 with w = K x + b' >= 0 and x . w = 0, where b' = vn - target - K a and a the
-    accumulated impulses: try both points active, then only the first, only the second, none
-    (Box2D 2.x b2ContactSolver::SolveVelocityConstraints). Stores the new accumulated impulses
-    and returns their increments (N s); if no case fits (degenerate) nothing changes.
-    """
-    nx = rc[k, NX]
-    ny = rc[k, NY]
-    k11 = rc[k, KN]
-    k22 = rc[k + 1, KN]
-    k12 = blk[k, K12]
-    a1 = c_impulse[k]
-    a2 = c_impulse[k + 1]
-    dvx = vbx - vax
-    dvy = vby - vay
-    vn1 = dvx * nx + dvy * ny + wb * rc[k, RNB] - wa * rc[k, RNA]
-    vn2 = dvx * nx + dvy * ny + wb * rc[k + 1, RNB] - wa * rc[k + 1, RNA]
-    b1 = vn1 - rc[k, TARGET] - (k11 * a1 + k12 * a2)
-    b2 = vn2 - rc[k + 1, TARGET] - (k12 * a1 + k22 * a2)
-    # both points active: x = -K^-1 b
-    x1 = -(blk[k, NM11] * b1 + blk[k, NM12] * b2)
-    x2 = -(blk[k, NM12] * b1 + blk[k, NM22] * b2)
-    if not (x1 >= 0.0 and x2 >= 0.0):
-        # only the first point active
-        x1 = -b1 / k11
-        x2 = 0.0
-        if not (x1 >= 0.0 and k12 * x1 + b2 >= 0.0):
-            # only the second point active
-            x1 = 0.0
-            x2 = -b2 / k22
-            if not (x2 >= 0.0 and k12 * x2 + b1 >= 0.0):
-                # neither
-                x1 = 0.0
-                x2 = 0.0
-                if not (b1 >= 0.0 and b2 >= 0.0):
-                    return 0.0, 0.0
-    c_impulse[k] = x1
-    c_impulse[k + 1] = x2
-    return x1 - a1, x2 - a2
+
+@numba.njit(cache=True, nogil=True)
+def _load_velocities(t, first, fixed, fixed_body, v):
+    """The velocities into the velocity columns of each moving body's first unit and of every
+    unit side with a concrete body."""
+    for body in range(v.shape[0]):
+        at = first[body]
+        if at >= 0:
+            t[at] = v[body, 0]
+            t[at + LANES] = v[body, 1]
+            t[at + 2 * LANES] = v[body, 2]
+    for f in range(fixed.shape[0]):
+        at = fixed[f]
+        body = fixed_body[f]
+        t[at] = v[body, 0]
+        t[at + LANES] = v[body, 1]
+        t[at + 2 * LANES] = v[body, 2]
+
+
+@numba.njit(cache=True, nogil=True)
+def _store_results(t, kind, lane_row, first, v, c_impulse, c_tangent):
+    """The velocities the passes handed back to each moving body's first unit, and every row's
+    accumulated impulses."""
+    for body in range(v.shape[0]):
+        at = first[body]
+        if at >= 0:
+            v[body, 0] = t[at]
+            v[body, 1] = t[at + LANES]
+            v[body, 2] = t[at + 2 * LANES]
+    for g in range(kind.shape[0]):
+        base = g * GROUP_WIDTH
+        for j in range(LANES):
+            k = lane_row[g * LANES + j]
+            if k < 0:
+                continue
+            c_impulse[k] = t[base + R_JN * LANES + j]
+            c_tangent[k] = t[base + R_JT * LANES + j]
+            if kind[g] == UNIT_BLOCK:
+                c_impulse[k + 1] = t[base + (ROW2 + R_JN) * LANES + j]
+                c_tangent[k + 1] = t[base + (ROW2 + R_JT) * LANES + j]

@@ -98,6 +98,7 @@ class Workspace:
         self.aabb = np.zeros((n, 4))
         self.expand = np.zeros(n)
         self.movable = ~model.concrete
+        self.solver_table = np.zeros(0)  # the impulse solver's scratch, grown as it needs
         self._allocate(pair_capacity)
 
     def _allocate(self, pairs: int) -> None:
@@ -196,15 +197,14 @@ def substep(model: Model, cfg: StepSettings, state: State, work: Workspace,
     # 5. impulses (semi-implicit Euler: gravity first, so contacts see it)
     if not cfg.explicit:
         add_gravity(state.velocity, work.movable, state.exists, cfg.gx, cfg.gy, cfg.h)
-    solve_contacts(rows, work.a, work.b, work.feature, work.slot, work.point, work.normal,
-                   work.depth, work.previous,
-                   state.position, state.velocity, state.angular_velocity,
-                   model.inv_mass, model.inv_inertia, cfg.gravity_dv, model.restitution,
-                   model.friction,
-                   cfg.restitution_rule, cfg.friction_rule, cfg.restitution_threshold,
-                   cfg.friction_on, cfg.seed_solver, cfg.iterations, cfg.warm_starting, cfg.h,
-                   cache.impulse, cache.tangent, work.impulse, work.tangent, work.restitution,
-                   work.push_a, work.push_b)
+    work.solver_table = solve_contacts(
+        rows, work.a, work.b, work.feature, work.slot, work.point, work.normal, work.depth,
+        work.previous, state.position, state.velocity, state.angular_velocity, model.inv_mass,
+        model.inv_inertia, cfg.gravity_dv, model.restitution, model.friction,
+        cfg.restitution_rule, cfg.friction_rule, cfg.restitution_threshold, cfg.friction_on,
+        cfg.seed_solver, cfg.iterations, cfg.warm_starting, cfg.h, cache.impulse, cache.tangent,
+        work.impulse, work.tangent, work.restitution, work.push_a, work.push_b,
+        work.solver_table)
     # 6. integration (the seed's explicit Euler: gravity last)
     advance_positions(state.position, state.angle, state.velocity, state.angular_velocity,
                       work.movable, state.exists, cfg.h)
