@@ -15,6 +15,8 @@ from __future__ import annotations
 import numba
 import numpy as np
 
+RUN = 16  # _stable_order insertion-sorts runs of this many elements before merging
+
 
 @numba.njit(cache=True, nogil=True)
 def find_pairs(position, radius, aabb, expand, movable, exists, pair_a, pair_b):
@@ -130,23 +132,22 @@ def speculative_reach(velocity, angular_velocity, radius, look_ahead, extra, exp
 
 @numba.njit(cache=True, nogil=True)
 def _stable_order(key):
-    """The permutation that sorts key stably (the same as np.argsort(key, kind="mergesort"),
-    with NumPy's order: NaN after every number): insertion-sorted runs, then merged bottom up
-    (the merge chooses without branches: which run's element comes next is unpredictable)."""
+    """The permutation that sorts key stably: the same as np.argsort(key, kind="mergesort"),
+    with NumPy's order (NaN after every number). Runs of RUN elements are insertion-sorted,
+    then merged bottom up."""
     m = key.shape[0]
     order = np.arange(m)
     spare = np.empty(m, dtype=np.int64)
-    run = 16
-    for start in range(0, m, run):
-        end = min(start + run, m)
+    for start in range(0, m, RUN):
+        end = min(start + RUN, m)
         for i in range(start + 1, end):
             x = order[i]
-            j = i - 1
-            while j >= start and _before(key[x], key[order[j]]):
-                order[j + 1] = order[j]
+            j = i
+            while j > start and _before(key[x], key[order[j - 1]]):
+                order[j] = order[j - 1]
                 j -= 1
-            order[j + 1] = x
-    width = run
+            order[j] = x
+    width = RUN
     while width < m:
         for start in range(0, m, 2 * width):
             mid = min(start + width, m)
@@ -156,10 +157,12 @@ def _stable_order(key):
             k = start
             while i < mid and j < end:
                 # the right run's element goes first only if strictly before (stable)
-                right = _before(key[order[j]], key[order[i]])
-                spare[k] = order[j] if right else order[i]
-                j += 1 if right else 0
-                i += 0 if right else 1
+                if _before(key[order[j]], key[order[i]]):
+                    spare[k] = order[j]
+                    j += 1
+                else:
+                    spare[k] = order[i]
+                    i += 1
                 k += 1
             while i < mid:
                 spare[k] = order[i]
@@ -177,4 +180,4 @@ def _stable_order(key):
 @numba.njit(cache=True, nogil=True)
 def _before(x, y):
     """x sorts strictly before y in NumPy's order (NaN after every number)."""
-    return (x < y) | ((y != y) & (x == x))
+    return x < y or (y != y and x == x)

@@ -105,11 +105,13 @@ def solve_contacts(rows, c_a, c_b, c_feature, c_slot, c_point, c_normal, c_depth
 
 
 @numba.njit(cache=True, nogil=True)
-def _packed(velocity, angular_velocity, inv_mass, inv_inertia):
-    """The velocities (vx, vy, w) and the inverse masses and inertias, packed per body: the
-    solvers work on these and write the velocities back at the end (_finish)."""
+def _solve_seed(rows, c_a, c_b, c_feature, c_slot, c_point, c_normal, c_depth, position,
+                velocity, angular_velocity, inv_mass, inv_inertia, gravity_dv, restitution,
+                friction, restitution_rule, friction_rule, restitution_threshold, friction_on, h,
+                c_impulse, c_tangent, c_restitution, c_push_a, c_push_b):
+    """solve_contacts with the seed's solver (_seed_pass)."""
     n = velocity.shape[0]
-    v = np.empty((n, 3))
+    v = np.empty((n, 3))  # the velocities (vx, vy, w) and inverse masses, packed per body
     inv = np.empty((n, 2))
     for i in range(n):
         v[i, 0] = velocity[i, 0]
@@ -117,28 +119,6 @@ def _packed(velocity, angular_velocity, inv_mass, inv_inertia):
         v[i, 2] = angular_velocity[i]
         inv[i, 0] = inv_mass[i]
         inv[i, 1] = inv_inertia[i]
-    return v, inv
-
-
-@numba.njit(cache=True, nogil=True)
-def _finish(rows, c_a, c_b, c_feature, c_slot, c_point, c_normal, bounce_back, inv, v,
-            position, velocity, angular_velocity, c_push_a, c_push_b):
-    """Write the packed velocities back and move the speculative contacts that bounced."""
-    for i in range(v.shape[0]):
-        velocity[i, 0] = v[i, 0]
-        velocity[i, 1] = v[i, 1]
-        angular_velocity[i] = v[i, 2]
-    _bounce_back(rows, c_a, c_b, c_feature, c_slot, c_point, c_normal, bounce_back, inv,
-                 position, c_push_a, c_push_b)
-
-
-@numba.njit(cache=True, nogil=True)
-def _solve_seed(rows, c_a, c_b, c_feature, c_slot, c_point, c_normal, c_depth, position,
-                velocity, angular_velocity, inv_mass, inv_inertia, gravity_dv, restitution,
-                friction, restitution_rule, friction_rule, restitution_threshold, friction_on, h,
-                c_impulse, c_tangent, c_restitution, c_push_a, c_push_b):
-    """solve_contacts with the seed's solver (_seed_pass)."""
-    v, inv = _packed(velocity, angular_velocity, inv_mass, inv_inertia)
     bounce_back = np.zeros(rows)  # (1 + e u_b / u) g of speculative rows that bounce (m)
     rc = np.empty((rows, COLUMNS))
     for k in range(rows):
@@ -169,28 +149,16 @@ def _solve_seed(rows, c_a, c_b, c_feature, c_slot, c_point, c_normal, c_depth, p
         c_impulse[k] = 0.0
         c_tangent[k] = 0.0
     _seed_pass(rows, c_a, c_b, c_depth, rc, inv, v, c_restitution, c_impulse, c_tangent)
-    _finish(rows, c_a, c_b, c_feature, c_slot, c_point, c_normal, bounce_back, inv, v, position,
-            velocity, angular_velocity, c_push_a, c_push_b)
+    for i in range(n):
+        velocity[i, 0] = v[i, 0]
+        velocity[i, 1] = v[i, 1]
+        angular_velocity[i] = v[i, 2]
+    _bounce_back(rows, c_a, c_b, c_feature, c_slot, c_point, c_normal, bounce_back, inv,
+                 position, c_push_a, c_push_b)
 
 
-# The per-row helpers take scalars only: an inlined helper that takes arrays costs an atomic
-# reference count update per array and call, several times the arithmetic here.
-
-
-@numba.njit(cache=True, nogil=True)
-def _arms(nx, ny, px, py, xa, ya, xb, yb):
-    """r x n and r x t (t = (-n_y, n_x)) of contact point p from a's and b's centres."""
-    rax = px - xa
-    ray = py - ya
-    rbx = px - xb
-    rby = py - yb
-    return rax * ny - ray * nx, rbx * ny - rby * nx, rax * nx + ray * ny, rbx * nx + rby * ny
-
-
-@numba.njit(cache=True, nogil=True)
-def _effective_mass(ima, iia, imb, iib, ra, rb):
-    """The seed's denominator 1/m_a + 1/m_b + (r_a x d)^2 / I_a + (r_b x d)^2 / I_b (1/kg)."""
-    return ima + imb + ra * ra * iia + rb * rb * iib
+# (_row_terms takes scalars only: an inlined helper that takes arrays costs an atomic reference
+# count update per array and call, several times the arithmetic here.)
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
@@ -200,9 +168,17 @@ def _row_terms(nx, ny, px, py, xa, ya, xb, yb, ima, iia, imb, iib, vax, vay, wa,
     """What the solver needs of one row: lever arms, k along the normal, k and 1/k along the
     tangent, target normal velocity, restitution used and the bounce-back distance (m; 0 unless
     a speculative row bounces)."""
-    rna, rnb, rta, rtb = _arms(nx, ny, px, py, xa, ya, xb, yb)
-    kn = _effective_mass(ima, iia, imb, iib, rna, rnb)
-    kt = _effective_mass(ima, iia, imb, iib, rta, rtb)
+    rax = px - xa
+    ray = py - ya
+    rbx = px - xb
+    rby = py - yb
+    rna = rax * ny - ray * nx  # r_ap x n
+    rnb = rbx * ny - rby * nx
+    rta = rax * nx + ray * ny  # r_ap x t, t = (-n_y, n_x)
+    rtb = rbx * nx + rby * ny
+    # the seed's denominator: 1/m_a + 1/m_b + (r_ap x n)^2 / I_a + (r_bp x n)^2 / I_b
+    kn = ima + imb + rna * rna * iia + rnb * rnb * iib
+    kt = ima + imb + rta * rta * iia + rtb * rtb * iib
     mt = 1.0 / kt if kt > 0.0 else 0.0
     # v_ab . n: normal velocity of b's point relative to a's, (w x r) . n = w (r x n)
     vn0 = (vbx - vax) * nx + (vby - vay) * ny + wb * rnb - wa * rna
@@ -322,8 +298,8 @@ def _seed_pass(rows, c_a, c_b, c_depth, rc, inv, v, c_restitution, c_impulse, c_
 # of one kind, which are computed side by side: the group table holds each column of a group's
 # LANES units contiguously, and the per-unit code is a loop over the lanes that the compiler turns
 # into vector instructions. Each lane performs exactly the floating-point operations of its unit,
-# in the same order, so the results are the same bits as one unit at a time (only if-statements
-# became selects between values that are computed either way).
+# in the same order, so the results are the same bits as one unit at a time (the block's case
+# analysis became selects between values that are computed either way).
 #
 # The two bodies' velocities are kept in the group table too (VAX..WB): after a group has been
 # computed, each lane hands its bodies' new velocities straight to the velocity columns of the next
@@ -336,14 +312,15 @@ def _seed_pass(rows, c_a, c_b, c_depth, rc, inv, v, c_restitution, c_impulse, c_
 LANES = 8
 UNIT_BLOCK = 0  # a two-point manifold solved as a 2x2 block
 UNIT_POINT = 1  # a single point
-# group table columns, each LANES wide: per row (a unit's first row, then at ROW2 its second):
-# normal, friction coefficient, r x t of a and b, 1 / k along the tangent, r x n of a and b,
-# target normal velocity, accumulated normal and tangent impulses, and R_K: k along the normal
-# (a block) or 1 / k (a point)
-R_NX, R_NY, R_MU, R_RTA, R_RTB, R_MT, R_RNA, R_RNB, R_TG, R_JN, R_JT, R_K = range(12)
-ROW2 = 12
-# then per unit: inverse masses and inertias, a block's K12 and K^-1, the velocities
-IMA, IIA, IMB, IIB, G12, GM11, GM12, GM22, VAX, VAY, WA, VBX, VBY, WB = range(24, 38)
+# The group table's columns, each LANES wide, by their offset in a group (column c * LANES): per
+# row (a unit's first row, then ROW2 further on its second): normal, friction coefficient,
+# r x t of a and b, 1 / k along the tangent, r x n of a and b, target normal velocity,
+# accumulated normal and tangent impulses, and R_K: k along the normal (a block) or 1 / k (a
+# point); then per unit: inverse masses and inertias, a block's K12 and K^-1, the velocities.
+(R_NX, R_NY, R_MU, R_RTA, R_RTB, R_MT, R_RNA, R_RNB, R_TG, R_JN, R_JT, R_K,
+ ROW2) = (c * LANES for c in range(13))
+(IMA, IIA, IMB, IIB, G12, GM11, GM12, GM22, VAX, VAY, WA, VBX, VBY,
+ WB) = (c * LANES for c in range(24, 38))
 GROUP_COLUMNS = 38
 GROUP_WIDTH = GROUP_COLUMNS * LANES
 U_LANES = np.uint64(LANES)
@@ -371,43 +348,49 @@ def _schedule(rows, c_a, c_b, c_slot, c_point, c_normal, position, inv, n):
     is the first row of a block).
     determinism: the waves depend only on the rows, visited in index order.
     """
-    start = np.empty(rows, dtype=np.bool_)  # the first row of a unit
     block = np.zeros(rows, dtype=np.bool_)  # the first row of a block
-    grounded = np.empty(rows, dtype=np.bool_)  # touches a concrete body
+    unit = np.empty(rows, dtype=np.int64)  # units between moving bodies, then the others
+    grounded = np.empty(rows, dtype=np.int64)  # units with a concrete body
+    units = 0
+    n_grounded = 0
     skip = False
     for k in range(rows):
+        if skip:  # a block's second row
+            skip = False
+            continue
         a = c_a[k]
         b = c_b[k]
-        start[k] = not skip
-        grounded[k] = inv[a, 0] == 0.0 or inv[b, 0] == 0.0
-        skip = False
         # (a slot-0 row always starts a unit)
         if k + 1 < rows and c_slot[k] == 0 and c_slot[k + 1] == 1:
-            rna1, rnb1, _, _ = _arms(c_normal[k, 0], c_normal[k, 1], c_point[k, 0],
-                                     c_point[k, 1], position[a, 0], position[a, 1],
-                                     position[b, 0], position[b, 1])
-            k11 = _effective_mass(inv[a, 0], inv[a, 1], inv[b, 0], inv[b, 1], rna1, rnb1)
-            a2 = c_a[k + 1]
-            b2 = c_b[k + 1]
-            rna2, rnb2, _, _ = _arms(c_normal[k + 1, 0], c_normal[k + 1, 1], c_point[k + 1, 0],
-                                     c_point[k + 1, 1], position[a2, 0], position[a2, 1],
-                                     position[b2, 0], position[b2, 1])
-            k22 = _effective_mass(inv[a2, 0], inv[a2, 1], inv[b2, 0], inv[b2, 1], rna2, rnb2)
+            # both points' r x n and k along the normal, as _row_terms computes them
+            nx = c_normal[k, 0]
+            ny = c_normal[k, 1]
+            rna1 = (c_point[k, 0] - position[a, 0]) * ny - (c_point[k, 1] - position[a, 1]) * nx
+            rnb1 = (c_point[k, 0] - position[b, 0]) * ny - (c_point[k, 1] - position[b, 1]) * nx
+            k11 = inv[a, 0] + inv[b, 0] + rna1 * rna1 * inv[a, 1] + rnb1 * rnb1 * inv[b, 1]
+            q = k + 1
+            a2 = c_a[q]
+            b2 = c_b[q]
+            nx = c_normal[q, 0]
+            ny = c_normal[q, 1]
+            rna2 = (c_point[q, 0] - position[a2, 0]) * ny - (c_point[q, 1] - position[a2, 1]) * nx
+            rnb2 = (c_point[q, 0] - position[b2, 0]) * ny - (c_point[q, 1] - position[b2, 1]) * nx
+            k22 = (inv[a2, 0] + inv[b2, 0] + rna2 * rna2 * inv[a2, 1]
+                   + rnb2 * rnb2 * inv[b2, 1])
             k12 = inv[a, 0] + inv[b, 0] + rna1 * rna2 * inv[a, 1] + rnb1 * rnb2 * inv[b, 1]
             det = k11 * k22 - k12 * k12
             if k11 * k11 < MAX_CONDITION * det:
                 block[k] = True
                 skip = True
-    unit = np.empty(rows, dtype=np.int64)
-    units = 0
-    for k in range(rows):
-        if start[k] and not grounded[k]:
+        if inv[a, 0] == 0.0 or inv[b, 0] == 0.0:
+            grounded[n_grounded] = k
+            n_grounded += 1
+        else:
             unit[units] = k
             units += 1
-    for k in range(rows):
-        if start[k] and grounded[k]:
-            unit[units] = k
-            units += 1
+    for u in range(n_grounded):
+        unit[units + u] = grounded[u]
+    units += n_grounded
     last = np.zeros(n, dtype=np.int64)
     slot = np.empty(units, dtype=np.int64)  # 2 wave + kind
     waves = 0
@@ -438,15 +421,15 @@ def _schedule(rows, c_a, c_b, c_slot, c_point, c_normal, position, inv, n):
         first[s] = groups
         groups += (count[s] + LANES - 1) // LANES
     kind = np.empty(groups, dtype=np.int64)
-    for s in range(2 * waves):
-        for g in range(first[s], first[s] + (count[s] + LANES - 1) // LANES):
-            kind[g] = s % 2
-    lane_row = np.full(groups * LANES, -1, dtype=np.int64)
-    filled = np.zeros(2 * waves, dtype=np.int64)
+    lane_row = np.empty(groups * LANES, dtype=np.int64)
+    lane_row[:] = -1
+    count[:] = 0
     for u in range(units):
         s = slot[u]
-        lane_row[first[s] * LANES + filled[s]] = unit[u]
-        filled[s] += 1
+        lane = first[s] * LANES + count[s]
+        lane_row[lane] = unit[u]
+        kind[lane // LANES] = s % 2
+        count[s] += 1
     return kind, lane_row, block
 
 
@@ -456,96 +439,96 @@ def _passes(t, kind, successor, groups, iterations):
     computed side by side (the loops over the lanes are vectorised by the compiler), then hand
     their bodies' velocities on to their successors.
 
-    (The per-kind code is written out here rather than in inlined helpers: inlining them cost
-    seconds of compile time. error_model="numpy": k11, k22 > 0 in a block, and a division then
-    needs no zero check, which would keep the loops from being vectorised.)
+    Two-point blocks: per manifold, friction first (non-penetration matters more, so it is solved
+    last), then both normal impulses at once as a 2x2 linear complementarity problem (Box2D's
+    block solver): find x >= 0 with w = K x + b' >= 0 and x . w = 0, where b' = vn - target - K a
+    and a the accumulated impulses: try both points active, then only the first, only the
+    second, none (Box2D 2.x b2ContactSolver::SolveVelocityConstraints); if no case fits
+    (degenerate) nothing changes. Every case is computed and the first that fits is selected,
+    which gives the same bits as trying them in turn. Single points: friction, then the normal
+    impulse (Box2D-Lite's ApplyImpulse), accumulated and clamped to stay >= 0.
+    (Both are written out here rather than in inlined helpers, which cost seconds of compile
+    time. error_model="numpy": k11, k22 > 0 in a block, and a division then needs no zero check,
+    which would keep the loops from being vectorised.)
     """
     for _ in range(iterations):
         for g in range(groups):
             base = g * GROUP_WIDTH
             if kind[g] == UNIT_BLOCK:
-                # One pass over a group of two-point blocks, lane by lane (vectorised by the compiler).
-                #
-                # Per manifold, friction first (non-penetration matters more, so it is solved last), then both
-                # normal impulses at once as a 2x2 linear complementarity problem (Box2D's block solver): find
-                # x >= 0 with w = K x + b' >= 0 and x . w = 0, where b' = vn - target - K a and a the
-                # accumulated impulses: try both points active, then only the first, only the second, none
-                # (Box2D 2.x b2ContactSolver::SolveVelocityConstraints); if no case fits (degenerate) nothing
-                # changes. Every case is computed and the first that fits is selected, which gives the same
-                # bits as trying them in turn. (error_model="numpy": k11, k22 > 0 in a block, and a division
-                # then needs no zero check, which would keep the loop from being vectorised.)
-                #
+                # two-point blocks
                 for j in range(LANES):
-                    vax = t[base + VAX * LANES + j]
-                    vay = t[base + VAY * LANES + j]
-                    wa = t[base + WA * LANES + j]
-                    vbx = t[base + VBX * LANES + j]
-                    vby = t[base + VBY * LANES + j]
-                    wb = t[base + WB * LANES + j]
-                    ima = t[base + IMA * LANES + j]
-                    iia = t[base + IIA * LANES + j]
-                    imb = t[base + IMB * LANES + j]
-                    iib = t[base + IIB * LANES + j]
+                    at = base + j  # the lane's first row
+                    at2 = at + ROW2  # its second
+                    vax = t[at + VAX]
+                    vay = t[at + VAY]
+                    wa = t[at + WA]
+                    vbx = t[at + VBX]
+                    vby = t[at + VBY]
+                    wb = t[at + WB]
+                    ima = t[at + IMA]
+                    iia = t[at + IIA]
+                    imb = t[at + IMB]
+                    iib = t[at + IIB]
                     # friction of each point; tangent t = (-n_y, n_x); Coulomb: |jt| <= mu j
-                    mu = t[base + R_MU * LANES + j]
-                    nx = t[base + R_NX * LANES + j]
-                    ny = t[base + R_NY * LANES + j]
-                    rta = t[base + R_RTA * LANES + j]
-                    rtb = t[base + R_RTB * LANES + j]
-                    vt = -(vbx - vax) * ny + (vby - vay) * nx + wb * rtb - wa * rta
-                    limit = mu * t[base + R_JN * LANES + j]
-                    old = t[base + R_JT * LANES + j]
-                    new = min(max(old - vt * t[base + R_MT * LANES + j], -limit), limit)
-                    dt = new - old
-                    on = mu > 0.0
-                    t[base + R_JT * LANES + j] = new if on else old
-                    vax = vax + dt * ny * ima if on else vax
-                    vay = vay - dt * nx * ima if on else vay
-                    wa = wa - dt * rta * iia if on else wa
-                    vbx = vbx - dt * ny * imb if on else vbx
-                    vby = vby + dt * nx * imb if on else vby
-                    wb = wb + dt * rtb * iib if on else wb
+                    mu = t[at + R_MU]
+                    if mu > 0.0:
+                        nx = t[at + R_NX]
+                        ny = t[at + R_NY]
+                        rta = t[at + R_RTA]
+                        rtb = t[at + R_RTB]
+                        vt = -(vbx - vax) * ny + (vby - vay) * nx + wb * rtb - wa * rta
+                        limit = mu * t[at + R_JN]
+                        old = t[at + R_JT]
+                        new = min(max(old - vt * t[at + R_MT], -limit), limit)
+                        t[at + R_JT] = new
+                        dt = new - old
+                        vax += dt * ny * ima
+                        vay -= dt * nx * ima
+                        wa -= dt * rta * iia
+                        vbx -= dt * ny * imb
+                        vby += dt * nx * imb
+                        wb += dt * rtb * iib
                     # (the second point)
-                    mu = t[base + (ROW2 + R_MU) * LANES + j]
-                    nx = t[base + (ROW2 + R_NX) * LANES + j]
-                    ny = t[base + (ROW2 + R_NY) * LANES + j]
-                    rta = t[base + (ROW2 + R_RTA) * LANES + j]
-                    rtb = t[base + (ROW2 + R_RTB) * LANES + j]
-                    vt = -(vbx - vax) * ny + (vby - vay) * nx + wb * rtb - wa * rta
-                    limit = mu * t[base + (ROW2 + R_JN) * LANES + j]
-                    old = t[base + (ROW2 + R_JT) * LANES + j]
-                    new = min(max(old - vt * t[base + (ROW2 + R_MT) * LANES + j], -limit), limit)
-                    dt = new - old
-                    on = mu > 0.0
-                    t[base + (ROW2 + R_JT) * LANES + j] = new if on else old
-                    vax = vax + dt * ny * ima if on else vax
-                    vay = vay - dt * nx * ima if on else vay
-                    wa = wa - dt * rta * iia if on else wa
-                    vbx = vbx - dt * ny * imb if on else vbx
-                    vby = vby + dt * nx * imb if on else vby
-                    wb = wb + dt * rtb * iib if on else wb
+                    mu = t[at2 + R_MU]
+                    if mu > 0.0:
+                        nx = t[at2 + R_NX]
+                        ny = t[at2 + R_NY]
+                        rta = t[at2 + R_RTA]
+                        rtb = t[at2 + R_RTB]
+                        vt = -(vbx - vax) * ny + (vby - vay) * nx + wb * rtb - wa * rta
+                        limit = mu * t[at2 + R_JN]
+                        old = t[at2 + R_JT]
+                        new = min(max(old - vt * t[at2 + R_MT], -limit), limit)
+                        t[at2 + R_JT] = new
+                        dt = new - old
+                        vax += dt * ny * ima
+                        vay -= dt * nx * ima
+                        wa -= dt * rta * iia
+                        vbx -= dt * ny * imb
+                        vby += dt * nx * imb
+                        wb += dt * rtb * iib
                     # both normal impulses (along the first point's normal)
-                    nx = t[base + R_NX * LANES + j]
-                    ny = t[base + R_NY * LANES + j]
-                    rna1 = t[base + R_RNA * LANES + j]
-                    rnb1 = t[base + R_RNB * LANES + j]
-                    rna2 = t[base + (ROW2 + R_RNA) * LANES + j]
-                    rnb2 = t[base + (ROW2 + R_RNB) * LANES + j]
-                    k11 = t[base + R_K * LANES + j]
-                    k22 = t[base + (ROW2 + R_K) * LANES + j]
-                    k12 = t[base + G12 * LANES + j]
-                    a1 = t[base + R_JN * LANES + j]
-                    a2 = t[base + (ROW2 + R_JN) * LANES + j]
+                    nx = t[at + R_NX]
+                    ny = t[at + R_NY]
+                    rna1 = t[at + R_RNA]
+                    rnb1 = t[at + R_RNB]
+                    rna2 = t[at2 + R_RNA]
+                    rnb2 = t[at2 + R_RNB]
+                    k11 = t[at + R_K]
+                    k22 = t[at2 + R_K]
+                    k12 = t[at + G12]
+                    a1 = t[at + R_JN]
+                    a2 = t[at2 + R_JN]
                     dvx = vbx - vax
                     dvy = vby - vay
                     vn1 = dvx * nx + dvy * ny + wb * rnb1 - wa * rna1
                     vn2 = dvx * nx + dvy * ny + wb * rnb2 - wa * rna2
-                    b1 = vn1 - t[base + R_TG * LANES + j] - (k11 * a1 + k12 * a2)
-                    b2 = vn2 - t[base + (ROW2 + R_TG) * LANES + j] - (k12 * a1 + k22 * a2)
-                    nm12 = t[base + GM12 * LANES + j]
+                    b1 = vn1 - t[at + R_TG] - (k11 * a1 + k12 * a2)
+                    b2 = vn2 - t[at2 + R_TG] - (k12 * a1 + k22 * a2)
+                    nm12 = t[at + GM12]
                     # both points active: x = -K^-1 b
-                    x1 = -(t[base + GM11 * LANES + j] * b1 + nm12 * b2)
-                    x2 = -(nm12 * b1 + t[base + GM22 * LANES + j] * b2)
+                    x1 = -(t[at + GM11] * b1 + nm12 * b2)
+                    x2 = -(nm12 * b1 + t[at + GM22] * b2)
                     # only the first point active; only the second
                     y1 = -b1 / k11
                     z2 = -b2 / k22
@@ -558,70 +541,70 @@ def _passes(t, kind, successor, groups, iterations):
                     fits = both | only1 | only2 | neither
                     d1 = n1 - a1 if fits else 0.0
                     d2 = n2 - a2 if fits else 0.0
-                    t[base + R_JN * LANES + j] = n1 if fits else a1
-                    t[base + (ROW2 + R_JN) * LANES + j] = n2 if fits else a2
+                    t[at + R_JN] = n1 if fits else a1
+                    t[at2 + R_JN] = n2 if fits else a2
                     px = (d1 + d2) * nx
                     py = (d1 + d2) * ny
-                    t[base + VAX * LANES + j] = vax - px * ima
-                    t[base + VAY * LANES + j] = vay - py * ima
-                    t[base + WA * LANES + j] = wa - (d1 * rna1 + d2 * rna2) * iia
-                    t[base + VBX * LANES + j] = vbx + px * imb
-                    t[base + VBY * LANES + j] = vby + py * imb
-                    t[base + WB * LANES + j] = wb + (d1 * rnb1 + d2 * rnb2) * iib
+                    t[at + VAX] = vax - px * ima
+                    t[at + VAY] = vay - py * ima
+                    t[at + WA] = wa - (d1 * rna1 + d2 * rna2) * iia
+                    t[at + VBX] = vbx + px * imb
+                    t[at + VBY] = vby + py * imb
+                    t[at + WB] = wb + (d1 * rnb1 + d2 * rnb2) * iib
             else:
-                # One pass over a group of single points, lane by lane: friction, then the normal impulse
-                # (Box2D-Lite's ApplyImpulse), accumulated and clamped to stay >= 0.
+                # single points
                 for j in range(LANES):
-                    vax = t[base + VAX * LANES + j]
-                    vay = t[base + VAY * LANES + j]
-                    wa = t[base + WA * LANES + j]
-                    vbx = t[base + VBX * LANES + j]
-                    vby = t[base + VBY * LANES + j]
-                    wb = t[base + WB * LANES + j]
-                    ima = t[base + IMA * LANES + j]
-                    iia = t[base + IIA * LANES + j]
-                    imb = t[base + IMB * LANES + j]
-                    iib = t[base + IIB * LANES + j]
-                    mu = t[base + R_MU * LANES + j]
-                    nx = t[base + R_NX * LANES + j]
-                    ny = t[base + R_NY * LANES + j]
-                    rta = t[base + R_RTA * LANES + j]
-                    rtb = t[base + R_RTB * LANES + j]
-                    vt = -(vbx - vax) * ny + (vby - vay) * nx + wb * rtb - wa * rta
-                    limit = mu * t[base + R_JN * LANES + j]
-                    old = t[base + R_JT * LANES + j]
-                    new = min(max(old - vt * t[base + R_MT * LANES + j], -limit), limit)
-                    dt = new - old
-                    on = mu > 0.0
-                    t[base + R_JT * LANES + j] = new if on else old
-                    vax = vax + dt * ny * ima if on else vax
-                    vay = vay - dt * nx * ima if on else vay
-                    wa = wa - dt * rta * iia if on else wa
-                    vbx = vbx - dt * ny * imb if on else vbx
-                    vby = vby + dt * nx * imb if on else vby
-                    wb = wb + dt * rtb * iib if on else wb
-                    rna = t[base + R_RNA * LANES + j]
-                    rnb = t[base + R_RNB * LANES + j]
+                    at = base + j
+                    vax = t[at + VAX]
+                    vay = t[at + VAY]
+                    wa = t[at + WA]
+                    vbx = t[at + VBX]
+                    vby = t[at + VBY]
+                    wb = t[at + WB]
+                    ima = t[at + IMA]
+                    iia = t[at + IIA]
+                    imb = t[at + IMB]
+                    iib = t[at + IIB]
+                    nx = t[at + R_NX]
+                    ny = t[at + R_NY]
+                    mu = t[at + R_MU]
+                    if mu > 0.0:
+                        rta = t[at + R_RTA]
+                        rtb = t[at + R_RTB]
+                        vt = -(vbx - vax) * ny + (vby - vay) * nx + wb * rtb - wa * rta
+                        limit = mu * t[at + R_JN]
+                        old = t[at + R_JT]
+                        new = min(max(old - vt * t[at + R_MT], -limit), limit)
+                        t[at + R_JT] = new
+                        dt = new - old
+                        vax += dt * ny * ima
+                        vay -= dt * nx * ima
+                        wa -= dt * rta * iia
+                        vbx -= dt * ny * imb
+                        vby += dt * nx * imb
+                        wb += dt * rtb * iib
+                    rna = t[at + R_RNA]
+                    rnb = t[at + R_RNB]
                     # (v_b + w_b x r_b - v_a - w_a x r_a) . n, using (w x r) . n = w (r x n)
                     vn = (vbx - vax) * nx + (vby - vay) * ny + wb * rnb - wa * rna
-                    old = t[base + R_JN * LANES + j]
-                    new = max(old + (t[base + R_TG * LANES + j] - vn) * t[base + R_K * LANES + j], 0.0)
-                    t[base + R_JN * LANES + j] = new
+                    old = t[at + R_JN]
+                    new = max(old + (t[at + R_TG] - vn) * t[at + R_K], 0.0)
+                    t[at + R_JN] = new
                     dj = new - old
-                    t[base + VAX * LANES + j] = vax - dj * nx * ima
-                    t[base + VAY * LANES + j] = vay - dj * ny * ima
-                    t[base + WA * LANES + j] = wa - dj * rna * iia
-                    t[base + VBX * LANES + j] = vbx + dj * nx * imb
-                    t[base + VBY * LANES + j] = vby + dj * ny * imb
-                    t[base + WB * LANES + j] = wb + dj * rnb * iib
+                    t[at + VAX] = vax - dj * nx * ima
+                    t[at + VAY] = vay - dj * ny * ima
+                    t[at + WA] = wa - dj * rna * iia
+                    t[at + VBX] = vbx + dj * nx * imb
+                    t[at + VBY] = vby + dj * ny * imb
+                    t[at + WB] = wb + dj * rnb * iib
             # hand the velocities on (unsigned positions: no negative-index wrap-around)
             for j in range(LANES):
-                at = base + VAX * LANES + j
+                at = base + VAX + j
                 to = successor[g * 2 * LANES + j]
                 t[to] = t[at]
                 t[to + U_LANES] = t[at + LANES]
                 t[to + U_2LANES] = t[at + 2 * LANES]
-                at = base + VBX * LANES + j
+                at = base + VBX + j
                 to = successor[g * 2 * LANES + LANES + j]
                 t[to] = t[at]
                 t[to + U_LANES] = t[at + LANES]
@@ -644,9 +627,17 @@ def _solve_sequential(rows, c_a, c_b, c_feature, c_slot, c_point, c_normal, c_de
     accumulated impulses to c_impulse / c_tangent. (Several small kernels rather than one: numba
     compiles them in a fraction of the time.)
     """
-    v, inv = _packed(velocity, angular_velocity, inv_mass, inv_inertia)
+    n = velocity.shape[0]
+    v = np.empty((n, 3))  # the velocities (vx, vy, w) and inverse masses, packed per body
+    inv = np.empty((n, 2))
+    for i in range(n):
+        v[i, 0] = velocity[i, 0]
+        v[i, 1] = velocity[i, 1]
+        v[i, 2] = angular_velocity[i]
+        inv[i, 0] = inv_mass[i]
+        inv[i, 1] = inv_inertia[i]
     kind, lane_row, block = _schedule(rows, c_a, c_b, c_slot, c_point, c_normal, position,
-                                      inv, v.shape[0])
+                                      inv, n)
     groups = kind.shape[0]
     if table.shape[0] < groups * GROUP_WIDTH + 3 * LANES:
         table = np.empty(2 * (groups * GROUP_WIDTH + 3 * LANES))
@@ -657,13 +648,63 @@ def _solve_sequential(rows, c_a, c_b, c_feature, c_slot, c_point, c_normal, c_de
                       c_previous, position, v, inv, gravity_dv, restitution, friction,
                       restitution_rule, friction_rule, restitution_threshold, friction_on,
                       warm_starting, h, prev_impulse, prev_tangent, c_restitution, bounce_back)
+    t = table
     if warm_starting:
-        _warm_start(rows, c_a, c_b, c_previous, warm, inv, v)
-    _load_velocities(table, first, fixed, fixed_body, v)
-    _passes(table, kind, successor, groups, iterations)
-    _store_results(table, kind, lane_row, first, v, c_impulse, c_tangent)
-    _finish(rows, c_a, c_b, c_feature, c_slot, c_point, c_normal, bounce_back, inv, v, position,
-            velocity, angular_velocity, c_push_a, c_push_b)
+        # applied in row order: -P to a, +P to b
+        for k in range(rows):
+            if c_previous[k] < 0:
+                continue
+            a = c_a[k]
+            b = c_b[k]
+            px = warm[k, 0]
+            py = warm[k, 1]
+            v[a, 0] -= px * inv[a, 0]
+            v[a, 1] -= py * inv[a, 0]
+            v[a, 2] -= warm[k, 2] * inv[a, 1]
+            v[b, 0] += px * inv[b, 0]
+            v[b, 1] += py * inv[b, 0]
+            v[b, 2] += warm[k, 3] * inv[b, 1]
+    # the velocities into each moving body's first unit and every unit side with a concrete body
+    for body in range(n):
+        at = first[body]
+        if at >= 0:
+            t[at] = v[body, 0]
+            t[at + LANES] = v[body, 1]
+            t[at + 2 * LANES] = v[body, 2]
+    for f in range(fixed.shape[0]):
+        at = fixed[f]
+        body = fixed_body[f]
+        t[at] = v[body, 0]
+        t[at + LANES] = v[body, 1]
+        t[at + 2 * LANES] = v[body, 2]
+
+    _passes(t, kind, successor, groups, iterations)
+
+    # the velocities the passes handed back to each moving body's first unit, and every row's
+    # accumulated impulses
+    for body in range(n):
+        at = first[body]
+        if at >= 0:
+            v[body, 0] = t[at]
+            v[body, 1] = t[at + LANES]
+            v[body, 2] = t[at + 2 * LANES]
+    for g in range(groups):
+        base = g * GROUP_WIDTH
+        for j in range(LANES):
+            k = lane_row[g * LANES + j]
+            if k < 0:
+                continue
+            c_impulse[k] = t[base + R_JN + j]
+            c_tangent[k] = t[base + R_JT + j]
+            if kind[g] == UNIT_BLOCK:
+                c_impulse[k + 1] = t[base + ROW2 + R_JN + j]
+                c_tangent[k + 1] = t[base + ROW2 + R_JT + j]
+    for i in range(n):
+        velocity[i, 0] = v[i, 0]
+        velocity[i, 1] = v[i, 1]
+        angular_velocity[i] = v[i, 2]
+    _bounce_back(rows, c_a, c_b, c_feature, c_slot, c_point, c_normal, bounce_back, inv,
+                 position, c_push_a, c_push_b)
     return table
 
 
@@ -691,21 +732,21 @@ def _layout(t, kind, lane_row, rows, c_a, c_b, inv):
             if k < 0:
                 for c in range(GROUP_COLUMNS):
                     t[base + c * LANES + j] = 0.0
-                t[base + R_K * LANES + j] = 1.0
-                t[base + (ROW2 + R_K) * LANES + j] = 1.0
+                t[base + R_K + j] = 1.0
+                t[base + ROW2 + R_K + j] = 1.0
                 successor[g * 2 * LANES + j] = sink
                 successor[g * 2 * LANES + LANES + j] = sink
                 continue
             where[k] = base + j
             if kind[g] == UNIT_BLOCK:
-                where[k + 1] = base + ROW2 * LANES + j
+                where[k + 1] = base + ROW2 + j
             for side in range(2):
                 body = c_a[k] if side == 0 else c_b[k]
                 im = inv[body, 0]
                 ii = inv[body, 1]
-                t[base + (IMA + 2 * side) * LANES + j] = im
-                t[base + (IIA + 2 * side) * LANES + j] = ii
-                at = base + (VAX + 3 * side) * LANES + j
+                t[base + (IMB if side else IMA) + j] = im
+                t[base + (IIB if side else IIA) + j] = ii
+                at = base + (VBX if side else VAX) + j
                 entry = g * 2 * LANES + side * LANES + j
                 if im > 0.0 or ii > 0.0:
                     if first[body] < 0:
@@ -769,21 +810,21 @@ def _fill_rows(t, where, block, rows, c_a, c_b, c_point, c_normal, c_depth, c_pr
         warm[k, 3] = jn * rnb + jt * rtb
         second = k > 0 and block[k - 1]
         at = where[k]
-        t[at + R_NX * LANES] = nx
-        t[at + R_NY * LANES] = ny
-        t[at + R_MU * LANES] = mu
-        t[at + R_RTA * LANES] = rta
-        t[at + R_RTB * LANES] = rtb
-        t[at + R_MT * LANES] = mt
-        t[at + R_RNA * LANES] = rna
-        t[at + R_RNB * LANES] = rnb
-        t[at + R_TG * LANES] = target
-        t[at + R_JN * LANES] = jn
-        t[at + R_JT * LANES] = jt
+        t[at + R_NX] = nx
+        t[at + R_NY] = ny
+        t[at + R_MU] = mu
+        t[at + R_RTA] = rta
+        t[at + R_RTB] = rtb
+        t[at + R_MT] = mt
+        t[at + R_RNA] = rna
+        t[at + R_RNB] = rnb
+        t[at + R_TG] = target
+        t[at + R_JN] = jn
+        t[at + R_JT] = jt
         if block[k] or second:
-            t[at + R_K * LANES] = kn
+            t[at + R_K] = kn
         else:
-            t[at + R_K * LANES] = 1.0 / kn if kn > 0.0 else 0.0
+            t[at + R_K] = 1.0 / kn if kn > 0.0 else 0.0
         if second:
             # the block's 2x2 effective mass K of both points and its inverse
             a = c_a[k - 1]
@@ -791,70 +832,11 @@ def _fill_rows(t, where, block, rows, c_a, c_b, c_point, c_normal, c_depth, c_pr
             k12 = inv[a, 0] + inv[b, 0] + rna1 * rna * inv[a, 1] + rnb1 * rnb * inv[b, 1]
             det = kn1 * kn - k12 * k12
             at = where[k - 1]
-            t[at + G12 * LANES] = k12
-            t[at + GM11 * LANES] = kn / det
-            t[at + GM12 * LANES] = -k12 / det
-            t[at + GM22 * LANES] = kn1 / det
+            t[at + G12] = k12
+            t[at + GM11] = kn / det
+            t[at + GM12] = -k12 / det
+            t[at + GM22] = kn1 / det
         rna1 = rna
         rnb1 = rnb
         kn1 = kn
     return warm
-
-
-@numba.njit(cache=True, nogil=True)
-def _warm_start(rows, c_a, c_b, c_previous, warm, inv, v):
-    """Apply the warm-start impulses in row order: -P to a, +P to b."""
-    for k in range(rows):
-        if c_previous[k] < 0:
-            continue
-        a = c_a[k]
-        b = c_b[k]
-        px = warm[k, 0]
-        py = warm[k, 1]
-        v[a, 0] -= px * inv[a, 0]
-        v[a, 1] -= py * inv[a, 0]
-        v[a, 2] -= warm[k, 2] * inv[a, 1]
-        v[b, 0] += px * inv[b, 0]
-        v[b, 1] += py * inv[b, 0]
-        v[b, 2] += warm[k, 3] * inv[b, 1]
-
-
-@numba.njit(cache=True, nogil=True)
-def _load_velocities(t, first, fixed, fixed_body, v):
-    """The velocities into the velocity columns of each moving body's first unit and of every
-    unit side with a concrete body."""
-    for body in range(v.shape[0]):
-        at = first[body]
-        if at >= 0:
-            t[at] = v[body, 0]
-            t[at + LANES] = v[body, 1]
-            t[at + 2 * LANES] = v[body, 2]
-    for f in range(fixed.shape[0]):
-        at = fixed[f]
-        body = fixed_body[f]
-        t[at] = v[body, 0]
-        t[at + LANES] = v[body, 1]
-        t[at + 2 * LANES] = v[body, 2]
-
-
-@numba.njit(cache=True, nogil=True)
-def _store_results(t, kind, lane_row, first, v, c_impulse, c_tangent):
-    """The velocities the passes handed back to each moving body's first unit, and every row's
-    accumulated impulses."""
-    for body in range(v.shape[0]):
-        at = first[body]
-        if at >= 0:
-            v[body, 0] = t[at]
-            v[body, 1] = t[at + LANES]
-            v[body, 2] = t[at + 2 * LANES]
-    for g in range(kind.shape[0]):
-        base = g * GROUP_WIDTH
-        for j in range(LANES):
-            k = lane_row[g * LANES + j]
-            if k < 0:
-                continue
-            c_impulse[k] = t[base + R_JN * LANES + j]
-            c_tangent[k] = t[base + R_JT * LANES + j]
-            if kind[g] == UNIT_BLOCK:
-                c_impulse[k + 1] = t[base + (ROW2 + R_JN) * LANES + j]
-                c_tangent[k + 1] = t[base + (ROW2 + R_JT) * LANES + j]
