@@ -277,16 +277,7 @@ class McapLogWriter:
         """
         if self._error is not None:
             raise LogError(f"writing {self.partial_path} failed: {self._error}")
-        exists = record.exists
-        world_changed = self._last_exists is None or not np.array_equal(exists,
-                                                                         self._last_exists)
-        if world_changed:
-            self._last_exists = exists.copy()
-        self.steps_written += 1
-        self.last_step = record.step
-        # first step at once (schemas and channels live in the first chunk), then every N steps
-        flush = self.steps_written == 1 or self.steps_written % self.flush_every == 0
-        item = (record, stats, world_changed, flush)
+        item = (record, stats, *self._count(record.step, record.exists))
         if self._queue is None:
             self._emit(item)
         else:
@@ -299,39 +290,41 @@ class McapLogWriter:
         writer process does with the frames `recorder.pack` encodes."""
         if self._queue is not None:
             raise LogError("write_messages is for a writer without a background thread")
+        world_changed, flush = self._count(step, exists)
+        self._add(step, time, exists if world_changed else None, bodies, contacts, stats, None,
+                  flush)
+
+    def _count(self, step: int, exists: np.ndarray) -> tuple[bool, bool]:
+        """Note one more step: whether existence changed (a ``/world`` message is due) and
+        whether the chunk closes after it (at once for the first step, where the schemas and
+        channels live, then every ``flush_every`` steps)."""
         world_changed = self._last_exists is None or not np.array_equal(exists,
                                                                          self._last_exists)
         if world_changed:
             self._last_exists = np.array(exists, dtype=bool)
         self.steps_written += 1
         self.last_step = step
-        flush = self.steps_written == 1 or self.steps_written % self.flush_every == 0
-        ch = self._channel
-        t = self.clock(step)
-        add = self._writer.add_message
-        if world_changed:
-            add(ch["/world"], t, encode_world(self.model, step, time, self._last_exists), t,
-                step)
-        add(ch["/bodies"], t, bodies, t, step)
-        add(ch["/contacts"], t, contacts, t, step)
-        add(ch["/stats"], t, encode_stats(step, time, stats), t, step)
-        if flush:
-            self._writer.flush()
+        return world_changed, self.steps_written == 1 or self.steps_written % self.flush_every == 0
 
     def _emit(self, item) -> None:
         record, stats, world_changed, flush = item
-        step = record.step
         if "state_hash" not in stats:
             stats = {**stats, "state_hash": state_hash(record)}
+        self._add(record.step, record.time, record.exists if world_changed else None,
+                  encode_bodies(record), encode_contacts(record), stats, record, flush)
+
+    def _add(self, step, time, world_exists, bodies, contacts, stats, record, flush) -> None:
+        """The step's messages (``/world`` first, with ``world_exists``, when given;
+        ``/foxglove/scene`` when enabled, from ``record``), then the chunk closed when
+        ``flush``. Uses nothing a later `write` changes: the writer thread runs behind."""
         ch = self._channel
         t = self.clock(step)
         add = self._writer.add_message
-        if world_changed:
-            add(ch["/world"], t, encode_world(self.model, step, record.time, record.exists), t,
-                step)
-        add(ch["/bodies"], t, encode_bodies(record), t, step)
-        add(ch["/contacts"], t, encode_contacts(record), t, step)
-        add(ch["/stats"], t, encode_stats(step, record.time, stats), t, step)
+        if world_exists is not None:
+            add(ch["/world"], t, encode_world(self.model, step, time, world_exists), t, step)
+        add(ch["/bodies"], t, bodies, t, step)
+        add(ch["/contacts"], t, contacts, t, step)
+        add(ch["/stats"], t, encode_stats(step, time, stats), t, step)
         if self.foxglove is not None:
             add(ch["/foxglove/scene"], t, self.foxglove.encode(record, t), t, step)
         if flush:

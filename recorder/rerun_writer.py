@@ -39,16 +39,6 @@ _PUSH = [40, 210, 210]
 _IMPULSE = [220, 60, 220]
 
 
-def _closed_strip_index(counts: np.ndarray, v_max: int) -> np.ndarray:
-    """(n, v_max + 1) vertex indices of each closed outline.
-
-    A body with c < v_max vertices repeats vertex 0 after closing: the degenerate segments draw
-    nothing, and every strip has the same length, so all strips form one (n, v_max + 1, 2) array.
-    """
-    j = np.arange(v_max + 1)[None, :]
-    return np.where(j < counts[:, None], j, 0)
-
-
 def default_scales(model) -> tuple[float, float]:
     """(impulse_scale m per N s, normal_length m) for drawing arrows.
 
@@ -116,17 +106,10 @@ class RerunLogWriter:
         self.batch = batch
         counts = np.asarray(model.vertex_count, dtype=np.int64)
         local = np.asarray(model.vertices_local, dtype=np.float64)
-        v_max = local.shape[1] if local.ndim == 3 else 0
-        idx = _closed_strip_index(counts, v_max)
-        n = len(self.names)
         self.vertices_local = np.ascontiguousarray(local, dtype=np.float64)
         self.vertex_count = np.ascontiguousarray(counts, dtype=np.int64)
-        # (n, v_max + 1, 2) closed outlines in the body frame (for the static concrete ones)
-        self.outline_local = local[np.arange(n)[:, None], idx] if n else np.zeros((0, 1, 2))
-        self._local_complex = self.outline_local[:, :, 0] + 1j * self.outline_local[:, :, 1]
         self.concrete = np.asarray(model.concrete, dtype=bool)
         self._not_concrete = ~self.concrete
-        self._mask_key: bytes | None = None
         auto_impulse, auto_normal = default_scales(model)
         self.impulse_scale = float(impulse_scale) if impulse_scale is not None else auto_impulse
         self.normal_length = float(normal_length) if normal_length is not None else auto_normal
@@ -193,27 +176,15 @@ class RerunLogWriter:
             return _EMPTY2, np.zeros(0, dtype=np.int64), counts
         return np.concatenate(points), np.concatenate(lengths), counts
 
-    def _outlines(self, record: StepRecord, mask: np.ndarray) -> np.ndarray:
-        """(k, v_max + 1, 2) float32 world outlines of the bodies in ``mask``:
-        position + R(angle) @ local (counter-clockwise), as complex numbers
-        ``z = p + e^{i angle} z_local`` (one multiply-add per vertex)."""
-        key = mask.tobytes()
-        if key != self._mask_key:
-            # the body set changes rarely: index the outlines once per change
-            self._mask_key = key
-            self._index = np.flatnonzero(mask)
-            self._local_c = np.ascontiguousarray(self._local_complex[self._index])
-        idx = self._index
-        angle = record.angle[idx]
-        rot = np.empty(idx.size, dtype=np.complex128)
-        rot.real = np.cos(angle)
-        rot.imag = np.sin(angle)
-        pos = np.empty(idx.size, dtype=np.complex128)
-        pos.real = record.position[idx, 0]
-        pos.imag = record.position[idx, 1]
-        z = self._local_c * rot[:, None]
-        z += pos[:, None]
-        return z.view(np.float64).reshape(idx.size, -1, 2).astype(np.float32)
+    def _outlines(self, record: StepRecord, mask: np.ndarray) -> list[np.ndarray]:
+        """Closed float32 world outlines of the bodies in ``mask`` (one (c + 1, 2) array each),
+        by the batches' kernel."""
+        from recorder.rerun_batch import outlines
+
+        idx = np.flatnonzero(mask)
+        points = outlines(record.angle[None], record.position[None], idx, self.vertices_local,
+                          self.vertex_count)
+        return np.split(points, np.cumsum(self.vertex_count[idx] + 1)[:-1])
 
     def write(self, record: StepRecord, stats: dict | None = None) -> None:
         """Buffer one step; sent column-wise every ``batch`` steps."""

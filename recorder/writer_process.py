@@ -11,15 +11,16 @@ the bytes of the files are the same as when written in-process.
 
 Transport (both ends in this module):
 - ring: shared memory (`ring_bytes_for`: 4-64 MiB; an anonymous ``memfd``, or an unlinked
-  temporary file where memfd is missing), handed to the child as a file descriptor. Each step is one frame (`pack`)
-  written contiguously at the next free offset, wrapping to 0 when it does not fit before the
+  temporary file where memfd is missing), handed to the child as a file descriptor. Each step
+  is one frame (`pack`) written contiguously at the next free offset, wrapping to 0 when it does not fit before the
   end. A frame larger than the ring travels inline in the command pipe instead.
 - commands, parent -> child, each a 25-byte header ``<cQQQ`` (several in one ``os.write``):
   ``C`` config (pickled dict follows, first message), ``F`` frame (offset, length, end),
   ``I`` inline frame (length; the frame follows), ``S`` sync (number, settle flag; answered
   once every earlier frame is taken), ``Z`` close (JSON arguments follow).
 - replies, child -> parent, 9-byte header ``<cQ``: ``K`` ready, ``R`` frame released (end),
-  ``S`` synced (its number), ``D`` closed (JSON ``{"path": ...}`` follows), ``E`` failed (UTF-8 message follows).
+  ``S`` synced (its number), ``D`` closed (JSON ``{"path": ...}`` follows), ``E`` failed
+  (UTF-8 message follows).
   The parent waits only when the ring is full, on `drain` and at close.
 - the child ignores SIGINT and sits in its own process group: Ctrl-C reaches the run loop, which
   stops between steps and closes the files through ``Z``. When the parent dies without closing
@@ -75,12 +76,18 @@ def _pad8(n: int) -> int:
     return (n + 7) & ~7
 
 
-def frame_size(record: StepRecord) -> int:
-    """Bytes of `record`'s frame (a multiple of 8)."""
+def _sizes(record: StepRecord) -> tuple[int, int, int]:
+    """Bytes of `record`'s Bodies and Contacts messages, and of its frame (a multiple of 8)."""
     from recorder.pack import message_sizes
 
-    sizes = message_sizes(int(record.step), int(record.angle.shape[0]), len(record.contacts))
-    return _HEAD.size + _pad8(sizes[0]) + _pad8(sizes[1])
+    bodies, contacts = message_sizes(int(record.step), int(record.angle.shape[0]),
+                                     len(record.contacts))
+    return bodies, contacts, _HEAD.size + _pad8(bodies) + _pad8(contacts)
+
+
+def frame_size(record: StepRecord) -> int:
+    """Bytes of `record`'s frame (a multiple of 8)."""
+    return _sizes(record)[2]
 
 
 def pack(record: StepRecord, stats: dict) -> bytes:
@@ -336,7 +343,7 @@ class WriterProcess:
         Returns False, sending nothing, when a float of the record is NaN or infinite (the
         caller says which: `recorder.recording.check_finite`).
         """
-        size = frame_size(record)
+        bodies_size, contacts_size, size = _sizes(record)
         if size > self.capacity or not self._compiled:
             return self._write_inline(record, stats)
         pos = self.head % self.capacity
@@ -348,7 +355,7 @@ class WriterProcess:
             self._notify()
             while head + size - self.released > self.capacity:
                 self._pump(block=True)
-        if not self._compiled_pack(pos, record, stats):
+        if not self._compiled_pack(pos, record, stats, bodies_size, contacts_size):
             return False
         self.head = head + size
         self._pending += _COMMAND.pack(b"F", pos, size, self.head)
@@ -379,12 +386,16 @@ class WriterProcess:
             self._send_raw(data)
         self._pump(block=False)
 
-    def _compiled_pack(self, pos: int, record: StepRecord, stats: dict | None) -> bool:
-        """Encode the frame at ``pos`` of the ring; False (frame unusable) on NaN/infinity."""
-        from recorder.pack import copy_values, message_sizes, pack_layout
+    def _compiled_pack(self, pos: int, record: StepRecord, stats: dict | None,
+                       bodies_size: int | None = None, contacts_size: int | None = None) -> bool:
+        """Encode the frame at ``pos`` of the ring (its messages' sizes from `_sizes`, given by
+        `write`, which needed them first); False (frame unusable) on NaN/infinity."""
+        from recorder.pack import copy_values, pack_layout
+
+        if bodies_size is None:
+            bodies_size, contacts_size, _ = _sizes(record)
 
         step, n, m = int(record.step), int(record.angle.shape[0]), len(record.contacts)
-        bodies_size, contacts_size = message_sizes(step, n, m)
         c = record.contacts
         base = pos + _HEAD.size
         bad, offsets, bodies_len, contacts_len, sums = pack_layout(
@@ -618,10 +629,6 @@ class _PolledReader:
         return data
 
 
-def _read_exact(stream, n: int) -> bytes | None:
-    return stream.read(n)
-
-
 def child_main(argv: list[str]) -> int:
     """The child: read commands, write the log; see the module docstring for the protocol."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
@@ -639,16 +646,16 @@ def child_main(argv: list[str]) -> int:
 
     writer = None
     try:
-        head = _read_exact(commands, _COMMAND.size)
+        head = commands.read(_COMMAND.size)
         if head is None:
             return 0
         kind, length, _, _ = _COMMAND.unpack(head)
         if kind != b"C":
             raise LogError("writer process: expected its configuration first")
-        writer = _make_writer(pickle.loads(_read_exact(commands, length)))
+        writer = _make_writer(pickle.loads(commands.read(length)))
         reply(b"K")
         while True:
-            head = _read_exact(commands, _COMMAND.size)
+            head = commands.read(_COMMAND.size)
             if head is None:  # the parent is gone without closing: keep what arrived
                 writer.abandon()
                 return 0
@@ -660,14 +667,14 @@ def child_main(argv: list[str]) -> int:
                     writer.write(Frame(data))
                 reply(b"R", c)
             elif kind == b"I":
-                writer.write(Frame(_read_exact(commands, a)))
+                writer.write(Frame(commands.read(a)))
             elif kind == b"S":
                 settle = getattr(writer, "settle", None)
                 if b and settle is not None:
                     settle()
                 reply(b"S", a)
             elif kind == b"Z":
-                args = json.loads(_read_exact(commands, a))
+                args = json.loads(commands.read(a))
                 path = writer.close(**args)
                 body = json.dumps({"path": path}).encode()
                 reply(b"D", len(body), body)
