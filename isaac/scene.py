@@ -687,8 +687,13 @@ def _compose(text: str, source: str):
     except yaml.MarkedYAMLError as exc:
         mark = exc.problem_mark or exc.context_mark
         what = " ".join(str(exc.problem or exc.context or "invalid YAML").split())
-        raise SceneError(f"YAML syntax error: {what}", source=source,
-                         line=None if mark is None else mark.line + 1) from None
+        line = None if mark is None else mark.line + 1
+        if "nesting depth" in what:
+            # PyYAML >= 6.0.3 bounds the depth itself; older ones end in RecursionError below:
+            # the same message either way
+            raise SceneError("the document is nested too deeply", source=source,
+                             line=line) from None
+        raise SceneError(f"YAML syntax error: {what}", source=source, line=line) from None
     except yaml.reader.ReaderError as exc:
         line = text[:exc.position].count("\n") + 1
         raise SceneError(f"character #x{exc.character:04x} is not allowed in YAML",
