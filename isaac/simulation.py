@@ -30,7 +30,10 @@ class Simulation:
     what the next step needs, so resuming gives the same bits as running through.
     """
 
-    def __init__(self, scene: Scene, *, start: StepRecord | None = None) -> None:
+    def __init__(self, scene: Scene, *, start: StepRecord | None = None,
+                 compile_ahead: bool = True) -> None:
+        """compile_ahead: on a machine whose numba cache lacks the solver, compile the step's
+        kernels in two processes at once before the first step (`isaac.compile_ahead`)."""
         self.scene = scene
         self.model: Model = build_model(scene)
         self.settings = StepSettings.of(scene.world)
@@ -41,6 +44,10 @@ class Simulation:
         self._last = self.record()
         if start is not None:
             self.resume(start)
+        if compile_ahead:
+            from isaac.compile_ahead import prepare
+
+            prepare(self)
 
     def resume(self, record: StepRecord) -> None:
         """Continue from a record of this scene (a logged keyframe), keeping the model.
@@ -84,11 +91,9 @@ class Simulation:
         """
         contacts, cache = step(self.model, self.settings, self.scene.world.dt, self.state,
                                self._work, self._cache)
-        s = self.state
-        body, field = first_diverged(s.position, s.angle, s.velocity, s.angular_velocity,
-                                     s.exists, DIVERGED_POSITION, DIVERGED_SPEED, DIVERGED_ANGLE)
+        body, field = self._diverged()
         if body >= 0:
-            failed = s.step
+            failed = self.state.step
             self._restore(self._last)
             name = self.model.names[body]
             raise SimulationError(
@@ -98,6 +103,13 @@ class Simulation:
         self._contacts, self._cache = contacts, cache
         self._last = self.record()
         return self._last
+
+    def _diverged(self) -> tuple[int, int]:
+        """(body, index into _FIELDS) of the first body whose state is non-finite or beyond the
+        DIVERGED_* bounds, or (-1, -1)."""
+        s = self.state
+        return first_diverged(s.position, s.angle, s.velocity, s.angular_velocity, s.exists,
+                              DIVERGED_POSITION, DIVERGED_SPEED, DIVERGED_ANGLE)
 
     def run(self, steps: int | None = None) -> Iterator[StepRecord]:
         """Yield the records of the next `steps` steps (default: the scene's `world.steps`)."""

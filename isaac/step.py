@@ -185,9 +185,26 @@ def detect(model: Model, cfg: StepSettings, state: State, work: Workspace,
     return rows
 
 
+def resolve(model: Model, cfg: StepSettings, state: State, work: Workspace,
+            cache: ContactCache, rows: int) -> None:
+    """Stage 5: the impulses of the first `rows` contact rows of `work` (velocities in place)."""
+    work.solver_table = solve_contacts(
+        rows, work.a, work.b, work.feature, work.slot, work.point, work.normal, work.depth,
+        work.previous, state.position, state.velocity, state.angular_velocity, model.inv_mass,
+        model.inv_inertia, cfg.gravity_dv, model.restitution, model.friction,
+        cfg.restitution_rule, cfg.friction_rule, cfg.restitution_threshold, cfg.friction_on,
+        cfg.seed_solver, cfg.iterations, cfg.warm_starting, cfg.h, cache.impulse, cache.tangent,
+        work.impulse, work.tangent, work.restitution, work.push_a, work.push_b,
+        work.solver_table)
+
+
 def substep(model: Model, cfg: StepSettings, state: State, work: Workspace,
-            cache: ContactCache, index: int) -> Contacts:
-    """Advance the state by one sub-step of cfg.h seconds; return the contacts resolved."""
+            cache: ContactCache, index: int, solve: bool = True) -> Contacts:
+    """Advance the state by one sub-step of cfg.h seconds; return the contacts resolved.
+
+    solve: False skips the impulses (stage 5); only `isaac.compile_ahead` does, to compile the
+    other stages while another process compiles the solver.
+    """
     rows = detect(model, cfg, state, work, cache)
     # 4. push-out
     push_out(rows, work.a, work.b, work.feature, work.slot, work.point, work.normal,
@@ -197,14 +214,8 @@ def substep(model: Model, cfg: StepSettings, state: State, work: Workspace,
     # 5. impulses (semi-implicit Euler: gravity first, so contacts see it)
     if not cfg.explicit:
         add_gravity(state.velocity, work.movable, state.exists, cfg.gx, cfg.gy, cfg.h)
-    work.solver_table = solve_contacts(
-        rows, work.a, work.b, work.feature, work.slot, work.point, work.normal, work.depth,
-        work.previous, state.position, state.velocity, state.angular_velocity, model.inv_mass,
-        model.inv_inertia, cfg.gravity_dv, model.restitution, model.friction,
-        cfg.restitution_rule, cfg.friction_rule, cfg.restitution_threshold, cfg.friction_on,
-        cfg.seed_solver, cfg.iterations, cfg.warm_starting, cfg.h, cache.impulse, cache.tangent,
-        work.impulse, work.tangent, work.restitution, work.push_a, work.push_b,
-        work.solver_table)
+    if solve:
+        resolve(model, cfg, state, work, cache, rows)
     # 6. integration (the seed's explicit Euler: gravity last)
     advance_positions(state.position, state.angle, state.velocity, state.angular_velocity,
                       work.movable, state.exists, cfg.h)
@@ -214,11 +225,13 @@ def substep(model: Model, cfg: StepSettings, state: State, work: Workspace,
 
 
 def step(model: Model, cfg: StepSettings, dt: float, state: State, work: Workspace,
-         cache: ContactCache) -> tuple[Contacts, ContactCache]:
-    """Advance `state` in place from step k to k + 1; return its contacts and the new cache."""
+         cache: ContactCache, solve: bool = True) -> tuple[Contacts, ContactCache]:
+    """Advance `state` in place from step k to k + 1; return its contacts and the new cache.
+
+    solve: as in `substep` (always True outside `isaac.compile_ahead`)."""
     parts = []
     for index in range(cfg.substeps):
-        contacts = substep(model, cfg, state, work, cache, index)
+        contacts = substep(model, cfg, state, work, cache, index, solve)
         cache = ContactCache.of(contacts, model.n_bodies)
         parts.append(contacts)
     state.step += 1

@@ -1,0 +1,107 @@
+"""First run on a machine: compile the step's kernels in two processes at once.
+
+With an empty numba cache the first step compiles every kernel it reaches, one after the other,
+in this process: about 14 s on the 2-core benchmark machine, over half of it the impulse solver
+(`isaac.impulse._solve_sequential` and the kernels it calls, ~7.8 s; detection, push-out and
+integration make up the rest). `prepare` splits that work: a helper process compiles the solver
+into the on-disk cache while this process compiles the other stages, then this process waits
+for the helper and loads the solver from the cache at its first call.
+
+Both sides compile by running the stages on a two-box scene with the simulation's own world
+settings (`Simulation(..., compile_ahead=False)`): numba specialises on argument types only
+(dtypes, dimensions, layouts), never on sizes or values, so the kernels compiled for the small
+scene are the ones the real scene calls. Nothing here changes what a step computes; if the
+helper cannot start or fails, this process compiles the solver itself, as it would without it.
+A warm cache (the solver's index file exists) skips all of this.
+"""
+
+from __future__ import annotations
+
+import os
+import pickle
+import subprocess
+import sys
+
+HELPER_TIMEOUT_S = 300.0  # a helper that takes longer is killed; this process compiles instead
+
+_BOX = ((-0.5, -0.5), (0.5, -0.5), (0.5, 0.5), (-0.5, 0.5))
+
+
+def solver_kernel(settings):
+    """The compiled solver `isaac.impulse.solve_contacts` dispatches to for these settings."""
+    from isaac import impulse
+
+    return impulse._solve_seed if settings.seed_solver else impulse._solve_sequential
+
+
+def is_cold(kernel) -> bool:
+    """True when numba has no cache index for `kernel` yet (its first call would compile it).
+
+    False without a cache to look at (NUMBA_DISABLE_JIT, cache off): nothing to do then.
+    """
+    cache_file = getattr(getattr(kernel, "_cache", None), "_cache_file", None)
+    index = getattr(cache_file, "_index_path", None)
+    return index is not None and not os.path.exists(index)
+
+
+def _small_scene(world):
+    """Two overlapping 1 m boxes (the lower one concrete) under `world`'s settings."""
+    from isaac.scene import BodySpec, Scene
+
+    return Scene(name="compile-ahead", world=world, bodies=(
+        BodySpec(name="floor", vertices=_BOX, concrete=True),
+        BodySpec(name="box", vertices=_BOX, position=(0.0, 0.95))))
+
+
+def prepare(sim) -> None:
+    """Before `sim`'s first step: if the solver is not in numba's cache, compile it in a helper
+    process while this one compiles the other stages (see the module docstring)."""
+    if not is_cold(solver_kernel(sim.settings)):
+        return
+    helper = _start_helper(sim.scene.world)
+    if helper is None:
+        return
+    try:
+        from isaac.simulation import Simulation
+        from isaac.step import step
+
+        small = Simulation(_small_scene(sim.scene.world), compile_ahead=False)
+        step(small.model, small.settings, small.scene.world.dt, small.state, small._work,
+             small._cache, solve=False)
+        small._diverged()
+    finally:
+        try:
+            helper.wait(timeout=HELPER_TIMEOUT_S)
+        except subprocess.TimeoutExpired:
+            helper.kill()
+            helper.wait()
+
+
+def _start_helper(world) -> subprocess.Popen | None:
+    """`python -m isaac.compile_ahead` with `world` pickled on its standard input, or None."""
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    env = dict(os.environ)
+    env["PYTHONPATH"] = os.pathsep.join(p for p in (root, env.get("PYTHONPATH")) if p)
+    try:
+        proc = subprocess.Popen([sys.executable, "-m", "isaac.compile_ahead"],
+                                stdin=subprocess.PIPE, stdout=subprocess.DEVNULL,
+                                stderr=subprocess.DEVNULL, env=env)
+        with proc.stdin:
+            proc.stdin.write(pickle.dumps(world, protocol=pickle.HIGHEST_PROTOCOL))
+    except OSError:
+        return None
+    return proc
+
+
+def _compile_solver(world) -> None:
+    """The helper's work: one call of the solver stage, on no contact rows (it compiles all the
+    same, and numba writes it to the cache)."""
+    from isaac.simulation import Simulation
+    from isaac.step import resolve
+
+    small = Simulation(_small_scene(world), compile_ahead=False)
+    resolve(small.model, small.settings, small.state, small._work, small._cache, 0)
+
+
+if __name__ == "__main__":
+    _compile_solver(pickle.load(sys.stdin.buffer))

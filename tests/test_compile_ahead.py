@@ -1,0 +1,69 @@
+"""First run with an empty numba cache (isaac.compile_ahead): the solver is compiled by a helper
+process into the cache, this process loads it from there, and the run's bits do not change."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+
+from isaac.compile_ahead import is_cold, solver_kernel
+from isaac.diagnostics import state_hash
+from isaac.simulation import Simulation
+from isaac.step import StepSettings
+
+from test_determinism import pile_scene
+
+_FIRST_RUN = r"""
+import json, sys
+sys.path.insert(0, {tests!r})
+from isaac.compile_ahead import is_cold, solver_kernel
+from isaac.diagnostics import state_hash
+from isaac.simulation import Simulation
+from test_determinism import pile_scene
+
+scene = pile_scene("balanced")
+sim = Simulation(scene)
+kernel = solver_kernel(sim.settings)
+cold_after_build = is_cold(kernel)
+hashes = [state_hash(rec) for rec in sim.run()]
+print(json.dumps({{"cold_after_build": cold_after_build, "hashes": hashes,
+                   "solver_cache_hits": sum(kernel.stats.cache_hits.values()),
+                   "solver_cache_misses": sum(kernel.stats.cache_misses.values())}}))
+"""
+
+
+def _first_run(tmp_path) -> dict:
+    """The balanced pile run in a fresh process with an empty numba cache."""
+    tests = os.path.dirname(os.path.abspath(__file__))
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "numba-cache")}
+    proc = subprocess.run([sys.executable, "-c", _FIRST_RUN.format(tests=tests)],
+                          capture_output=True, text=True, env=env, timeout=600, check=False)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    return json.loads(proc.stdout.strip().splitlines()[-1])
+
+
+def test_a_cold_cache_gets_the_solver_from_the_helper_and_the_same_bits(tmp_path):
+    # one first run (~8 s of compiling on 2 cores): the path every new machine and CI takes
+    got = _first_run(tmp_path)
+    assert got["cold_after_build"] is False  # the helper wrote the solver's cache index
+    # the first step loaded the solver from that cache instead of compiling it
+    assert (got["solver_cache_hits"], got["solver_cache_misses"]) == (1, 0)
+    expected = [state_hash(rec) for rec in Simulation(pile_scene("balanced")).run()]
+    assert got["hashes"] == expected
+
+
+def test_a_warm_cache_is_not_cold_and_a_kernel_without_cache_never_is():
+    sim = Simulation(pile_scene("balanced"))
+    sim.step()  # compiled or loaded in this process: the cache index exists now
+    assert not is_cold(solver_kernel(sim.settings))
+    assert not is_cold(lambda: None)  # NUMBA_DISABLE_JIT: plain functions, nothing to prepare
+
+
+def test_the_seed_solver_is_the_kernel_prepared_for_the_seed_preset():
+    from isaac import impulse
+
+    assert solver_kernel(StepSettings.of(pile_scene("seed").world)) is impulse._solve_seed
+    assert (solver_kernel(StepSettings.of(pile_scene("balanced").world))
+            is impulse._solve_sequential)
