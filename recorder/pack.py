@@ -168,3 +168,132 @@ def copy_values(view: memoryview, offsets, arrays) -> None:
         if at >= 0:
             data = memoryview(np.ascontiguousarray(arr)).cast("B")
             view[at:at + len(data)] = data
+
+
+# -- the Rerun writer's frame ------------------------------------------------------------------
+# The Rerun writer process needs far less than the MCAP messages (no velocities, indices,
+# depths...) and decoded protobuf cost it a quarter of its time, so its frame is raw
+# native-endian arrays (both ends run on one machine), each at an 8-byte boundary, in units of
+# 8-byte words: the head (RERUN_HEAD words: step int64, time float64 s, n int64, m int64, the
+# nine `/stats` values as float64 in writer_process.STAT_KEYS order), then position (n, 2) m,
+# angle (n,) rad, exists (n,) one byte each, point (m, 2) m, normal (m, 2), impulse (m,) N s,
+# push_a (m, 2) m, push_b (m, 2) m.
+RERUN_HEAD = 13
+
+
+def rerun_offsets(n, m):
+    """Word offsets of a Rerun frame's arrays for n bodies and m contact rows: position, angle,
+    exists (a byte offset is 8x), point, normal, impulse, push_a, push_b, and the frame's end."""
+    position = RERUN_HEAD
+    angle = position + 2 * n
+    exists = angle + n
+    point = exists + (n + 7) // 8
+    normal = point + 2 * m
+    impulse = normal + 2 * m
+    push_a = impulse + m
+    push_b = push_a + 2 * m
+    return position, angle, exists, point, normal, impulse, push_a, push_b, push_b + 2 * m
+
+
+_rerun_offsets = numba.njit(cache=True, nogil=True)(rerun_offsets)  # the same rule, compiled
+
+
+@numba.njit(cache=True, nogil=True)
+def _put_pairs(words, at, src):
+    """src (k, 2) float64 into words[at:at + 2k]; True when every value is finite."""
+    ok = True
+    for i in range(src.shape[0]):
+        x = src[i, 0]
+        y = src[i, 1]
+        words[at + 2 * i] = x
+        words[at + 2 * i + 1] = y
+        ok &= np.isfinite(x) & np.isfinite(y)
+    return ok
+
+
+@numba.njit(cache=True, nogil=True)
+def _put(words, at, src):
+    """src (k,) float64 into words[at:at + k]; True when every value is finite."""
+    ok = True
+    for i in range(src.shape[0]):
+        x = src[i]
+        words[at + i] = x
+        ok &= np.isfinite(x)
+    return ok
+
+
+@numba.njit(cache=True, nogil=True)
+def _first(bad, k):
+    """The smaller field index of ``bad`` (-1: none yet) and ``k``."""
+    return k if bad < 0 or k < bad else bad
+
+
+@numba.njit(cache=True, nogil=True)
+def pack_rerun(buf, at, step, time, position, angle, exists, velocity, angular_velocity, point,
+               normal, depth, push_a, push_b, impulse, tangent_impulse, restitution, mass,
+               inertia, concrete, gx, gy):
+    """Write a step's Rerun frame (layout above) at byte ``at`` (a multiple of 8) of ``buf``
+    (uint8, a multiple of 8 bytes long), check every float of the record and sum the `/stats`
+    values as `pack_layout` does.
+
+    Returns -1, or the index (in BODY_FIELDS + CONTACT_FIELDS) of the first float field holding
+    a NaN or an infinity; the frame must then not be sent. Fields the frame leaves out
+    (velocities, depth, tangent impulse, restitution) are checked all the same: the recorder's
+    never-write-NaN check is this pass when the Rerun writer is the only one.
+    """
+    words = buf.view(np.float64)
+    ints = buf.view(np.int64)
+    n = angle.shape[0]
+    m = depth.shape[0]
+    base = at // 8
+    o = _rerun_offsets(n, m)
+    bad = -1
+    if not _put_pairs(words, base + o[0], position):
+        bad = _first(bad, 0)
+    if not _put(words, base + o[1], angle):
+        bad = _first(bad, 1)
+    flags = (base + o[2]) * 8
+    for i in range(n):
+        buf[flags + i] = 1 if exists[i] else 0
+    if not _put_pairs(words, base + o[3], point):
+        bad = _first(bad, 10)
+    if not _put_pairs(words, base + o[4], normal):
+        bad = _first(bad, 11)
+    if not _put(words, base + o[5], impulse):
+        bad = _first(bad, 15)
+    if not _put_pairs(words, base + o[6], push_a):
+        bad = _first(bad, 13)
+    if not _put_pairs(words, base + o[7], push_b):
+        bad = _first(bad, 14)
+    # the floats the frame leaves out
+    if not _finite(velocity):
+        bad = _first(bad, 2)
+    if not _finite(angular_velocity):
+        bad = _first(bad, 3)
+    if not _finite(depth):
+        bad = _first(bad, 12)
+    if not _finite(tangent_impulse):
+        bad = _first(bad, 16)
+    if not _finite(restitution):
+        bad = _first(bad, 17)
+    ke, pe, px, py, ang = _sums(mass, inertia, concrete, exists, position, velocity,
+                                angular_velocity, gx, gy)
+    max_depth = depth[0] if m else 0.0
+    max_impulse = impulse[0] if m else 0.0
+    for i in range(1, m):
+        max_depth = max(max_depth, depth[i])
+        max_impulse = max(max_impulse, impulse[i])
+    ints[base] = step
+    words[base + 1] = time
+    ints[base + 2] = n
+    ints[base + 3] = m
+    words[base + 4] = ke
+    words[base + 5] = pe
+    words[base + 6] = ke + pe
+    words[base + 7] = px
+    words[base + 8] = py
+    words[base + 9] = ang
+    words[base + 10] = m
+    words[base + 11] = max_depth
+    words[base + 12] = max_impulse
+    return bad

@@ -144,11 +144,35 @@ class RerunLogWriter:
             static=True)
 
     def _reset(self) -> None:
+        """Start an empty batch (the buffers are kept and reused)."""
+        self._count = 0  # steps in the batch
+        self._rows = 0  # contact rows in the batch
         self._steps: list[int] = []
         self._times: list[float] = []
-        self._records: list[StepRecord] = []
         self._moving: list[np.ndarray] = []  # moving bodies' indices per step (shared)
-        self._stat_dicts: list[dict] = []
+        self._stats_rows: list[int] = []  # the batch's steps that came with stats
+
+    def _allocate(self, n: int) -> None:
+        """Per-batch buffers for n bodies; the contact rows grow as needed (`_grow`)."""
+        b = self.batch
+        self._angle = np.empty((b, n))  # rad
+        self._position = np.empty((b, n, 2))  # m, world
+        self._stats = np.empty((b, len(STAT_NAMES)))
+        self._counts = np.zeros(b, dtype=np.int64)  # contact rows per step
+        self._contact_cap = 0
+        self._grow(4 * n * b)  # a pile has 1-3 rows per body: rarely grown
+
+    def _grow(self, rows: int) -> None:
+        """Room for ``rows`` contact rows in the batch, keeping the ones buffered."""
+        cap = max(rows, 2 * self._contact_cap)
+        old = getattr(self, "_point", None)
+        for name, shape in (("_point", (cap, 2)), ("_normal", (cap, 2)), ("_impulse", (cap,)),
+                            ("_push_a", (cap, 2)), ("_push_b", (cap, 2))):
+            new = np.empty(shape)
+            if old is not None:
+                new[:self._rows] = getattr(self, name)[:self._rows]
+            setattr(self, name, new)
+        self._contact_cap = cap
 
     def _batch_strips(self) -> tuple[np.ndarray, np.ndarray, list[int]]:
         """Closed float32 outlines of the buffered steps: their points (one strip after the
@@ -156,96 +180,128 @@ class RerunLogWriter:
         run of steps with the same moving bodies."""
         from recorder.rerun_batch import outlines
 
-        recs, moving = self._records, self._moving
+        moving, count = self._moving, self._count
         points, lengths, counts = [], [], []
         i = 0
-        while i < len(recs):
+        while i < count:
             idx = moving[i]
             j = i + 1
-            while j < len(recs) and moving[j] is idx:
+            while j < count and moving[j] is idx:
                 j += 1
             counts.extend([idx.size] * (j - i))
             if idx.size:
-                angle = np.stack([r.angle for r in recs[i:j]])
-                position = np.stack([r.position for r in recs[i:j]])
-                points.append(outlines(angle, position, idx, self.vertices_local,
-                                       self.vertex_count))
+                points.append(outlines(self._angle[i:j], self._position[i:j], idx,
+                                       self.vertices_local, self.vertex_count))
                 lengths.append(np.tile(self.vertex_count[idx] + 1, j - i))
             i = j
         if not points:
             return _EMPTY2, np.zeros(0, dtype=np.int64), counts
+        if len(points) == 1:
+            return points[0], lengths[0], counts
         return np.concatenate(points), np.concatenate(lengths), counts
 
-    def _outlines(self, record: StepRecord, mask: np.ndarray) -> list[np.ndarray]:
+    def _outlines(self, angle: np.ndarray, position: np.ndarray,
+                  mask: np.ndarray) -> list[np.ndarray]:
         """Closed float32 world outlines of the bodies in ``mask`` (one (c + 1, 2) array each),
         by the batches' kernel."""
         from recorder.rerun_batch import outlines
 
         idx = np.flatnonzero(mask)
-        points = outlines(record.angle[None], record.position[None], idx, self.vertices_local,
-                          self.vertex_count)
+        points = outlines(np.ascontiguousarray(angle, dtype=np.float64)[None],
+                          np.ascontiguousarray(position, dtype=np.float64)[None], idx,
+                          self.vertices_local, self.vertex_count)
         return np.split(points, np.cumsum(self.vertex_count[idx] + 1)[:-1])
 
     def write(self, record: StepRecord, stats: dict | None = None) -> None:
-        """Buffer one step; sent column-wise every ``batch`` steps."""
+        """Buffer one step (its `/stats` values without the hash, or None to leave them out);
+        sent column-wise every ``batch`` steps."""
+        c = record.contacts
+        values = (None if stats is None
+                  else np.array([float(stats[k]) for k in STAT_NAMES], dtype=np.float64))
+        self.append(record.step, record.time, record.position, record.angle, record.exists,
+                    c.point, c.normal, c.impulse, c.push_a, c.push_b, values)
+
+    def append(self, step: int, time: float, position: np.ndarray, angle: np.ndarray,
+               exists: np.ndarray, point: np.ndarray, normal: np.ndarray, impulse: np.ndarray,
+               push_a: np.ndarray, push_b: np.ndarray, stats: np.ndarray | None) -> None:
+        """Buffer one step, copying its arrays (they may be reused once this returns).
+
+        position (n, 2) m and angle (n,) rad, world; exists (n,) bool; per contact row: point
+        (m, 2) m, unit normal (m, 2) from a to b, impulse (m,) N s, push_a, push_b (m, 2) m;
+        stats: the nine `/stats` values in STAT_NAMES order, or None. `write` and the Rerun
+        writer process (`recorder.writer_process.RerunFrame`) both come here.
+        """
         rec = self.rec
-        exists = np.asarray(record.exists, dtype=bool)
+        exists = np.asarray(exists, dtype=bool)
         if not self._static_done:
             concrete = self.concrete & exists
             if np.any(concrete):
                 rec.log("world/bodies/concrete", rr.LineStrips2D(
-                    self._outlines(record, concrete), colors=[_CONCRETE], radii=[-1.5],
+                    self._outlines(angle, position, concrete), colors=[_CONCRETE], radii=[-1.5],
                     labels=[self.names[k] for k in np.flatnonzero(concrete)]), static=True)
             self._static_done = True
+            self._allocate(int(exists.shape[0]))
         moving = exists & self._not_concrete
         key = moving.tobytes()
         if key != self._last_labels_key:
             # labels change only when a body enters or leaves: logged then, not every step
-            rec.set_time("step", sequence=record.step)
-            rec.set_time("sim_time", duration=record.time)
+            rec.set_time("step", sequence=int(step))
+            rec.set_time("sim_time", duration=float(time))
             rec.log("world/bodies/moving", rr.LineStrips2D.from_fields(
                 labels=[self.names[k] for k in np.flatnonzero(moving)]))
             self._last_labels_key = key
-        self._steps.append(record.step)
-        self._times.append(record.time)
         if key != self._moving_key:
             self._moving_key = key
             self._moving_index = np.flatnonzero(moving)
-        # records are immutable: the outlines and arrows of a whole batch are computed in _send,
-        # a few numpy calls per batch instead of per step
-        self._records.append(record)
+        k = self._count
+        self._steps.append(int(step))
+        self._times.append(float(time))
         self._moving.append(self._moving_index)
+        # the outlines and arrows of a whole batch are computed in _send from these buffers,
+        # a few compiled passes per batch instead of per step
+        self._angle[k] = angle
+        self._position[k] = position
+        m = int(impulse.shape[0])
+        self._counts[k] = m
+        if m:
+            lo = self._rows
+            if lo + m > self._contact_cap:
+                self._grow(lo + m)
+            self._point[lo:lo + m] = point
+            self._normal[lo:lo + m] = normal
+            self._impulse[lo:lo + m] = impulse
+            self._push_a[lo:lo + m] = push_a
+            self._push_b[lo:lo + m] = push_b
+            self._rows = lo + m
         if stats is not None:
-            self._stat_dicts.append(stats)
-        if len(self._steps) >= self.batch:
+            self._stats[k] = stats
+            self._stats_rows.append(k)
+        self._count = k + 1
+        if self._count >= self.batch:
             self._send()
 
     def _send(self) -> None:
-        if not self._steps:
+        if not self._count:
             return
         rec = self.rec
+        count, rows = self._count, self._rows
         times = [rr.TimeColumn("step", sequence=self._steps),
                  rr.TimeColumn("sim_time", duration=self._times)]
         points, lengths, strip_counts = self._batch_strips()
         rec.send_columns("world/bodies/moving", indexes=times,
                          columns=rr.LineStrips2D.columns(
                              strips=_strips_arrow(points, lengths)).partition(strip_counts))
-        contacts = [r.contacts for r in self._records]
-        counts = [len(c) for c in contacts]
-        n_steps = len(counts)
-        if any(counts):
+        counts = self._counts[:count]
+        if rows:
             from recorder.rerun_batch import contact_arrows
 
-            live = [c for c in contacts if len(c)]
             points, normals, impulses, push_pt, push_v, push_counts = contact_arrows(
-                np.asarray(counts, dtype=np.int64),
-                *(np.concatenate([getattr(c, f) for c in live])
-                  for f in ("point", "normal", "impulse", "push_a", "push_b")),
-                self.normal_length, self.impulse_scale)
-            push_counts = push_counts.tolist()
+                counts, self._point[:rows], self._normal[:rows], self._impulse[:rows],
+                self._push_a[:rows], self._push_b[:rows], self.normal_length,
+                self.impulse_scale)
         else:
             points = normals = impulses = push_pt = push_v = _EMPTY2
-            push_counts = [0] * n_steps
+            push_counts = np.zeros(count, dtype=np.int64)
         rec.send_columns("world/contacts", indexes=times,
                          columns=rr.Points2D.columns(positions=points).partition(counts))
         rec.send_columns("world/normals", indexes=times,
@@ -257,11 +313,17 @@ class RerunLogWriter:
         rec.send_columns("world/push", indexes=times,
                          columns=rr.Arrows2D.columns(origins=push_pt, vectors=push_v)
                          .partition(push_counts))
-        if self._stat_dicts:
-            for k in STAT_NAMES:
-                values = np.array([float(d[k]) for d in self._stat_dicts])
-                rec.send_columns(f"stats/{k}", indexes=times,
-                                 columns=rr.Scalars.columns(scalars=values))
+        with_stats = self._stats_rows
+        if with_stats:
+            stat_times = times
+            if len(with_stats) < count:  # some steps came without stats
+                stat_times = [rr.TimeColumn("step", sequence=[self._steps[k] for k in with_stats]),
+                              rr.TimeColumn("sim_time",
+                                            duration=[self._times[k] for k in with_stats])]
+            values = self._stats[with_stats]
+            for j, name in enumerate(STAT_NAMES):
+                rec.send_columns(f"stats/{name}", indexes=stat_times,
+                                 columns=rr.Scalars.columns(scalars=values[:, j].copy()))
         self._reset()
 
     def settle(self) -> None:

@@ -5,15 +5,20 @@ simulating process cost 40-90 % on top of the 500- and 2,000-body piles, and a w
 did not hide it: the mcap and Rerun libraries run Python code that holds the GIL, so the engine
 waited for the writer at every kernel boundary. In a child process all of that runs beside the
 engine. The engine's share of a step is one compiled copy of the record into shared memory
-(`recorder.pack`, which also checks every float for NaN and infinity) and, every NOTIFY_EVERY
-steps, one pipe write; the child computes the /stats values with the same compiled kernel, so
-the bytes of the files are the same as when written in-process.
+(`recorder.pack`, which also checks every float for NaN and infinity and sums the /stats
+values) and, every NOTIFY_EVERY steps, one pipe write; the files' bytes are the same as when
+written in-process.
 
 Transport (both ends in this module):
 - ring: shared memory (`ring_bytes_for`: 4-64 MiB; an anonymous ``memfd``, or an unlinked
   temporary file where memfd is missing), handed to the child as a file descriptor. Each step
-  is one frame (`pack`) written contiguously at the next free offset, wrapping to 0 when it does not fit before the
-  end. A frame larger than the ring travels inline in the command pipe instead.
+  is one frame written contiguously at the next free offset, wrapping to 0 when it does not fit
+  before the end. A frame larger than the ring travels inline in the command pipe instead.
+  MCAP frames (`pack`, `Frame`): a head with the /stats values, then the encoded `/bodies` and
+  `/contacts` messages, which the mcap library takes as they are. Rerun frames
+  (`recorder.pack.pack_rerun`, `read_rerun_frame`): only what the recording draws, as raw
+  native-endian arrays that the child copies straight into `RerunLogWriter`'s batch buffers;
+  decoding protobuf back into a record had cost that child a quarter of its time.
 - commands, parent -> child, each a 25-byte header ``<cQQQ`` (several in one ``os.write``):
   ``C`` config (pickled dict follows, first message), ``F`` frame (offset, length, end),
   ``I`` inline frame (length; the frame follows), ``S`` sync (number, settle flag; answered
@@ -42,6 +47,7 @@ import subprocess
 import sys
 import tempfile
 import time
+from typing import NamedTuple
 
 import numpy as np
 
@@ -88,6 +94,45 @@ def _sizes(record: StepRecord) -> tuple[int, int, int]:
 def frame_size(record: StepRecord) -> int:
     """Bytes of `record`'s frame (a multiple of 8)."""
     return _sizes(record)[2]
+
+
+def rerun_frame_size(record: StepRecord) -> int:
+    """Bytes of `record`'s Rerun frame (`recorder.pack.rerun_offsets`; a multiple of 8)."""
+    from recorder.pack import rerun_offsets
+
+    return 8 * rerun_offsets(int(record.angle.shape[0]), len(record.contacts))[-1]
+
+
+class RerunFrame(NamedTuple):
+    """One step as the Rerun writer process receives it (`recorder.pack.pack_rerun`): views of
+    the frame's arrays, valid while its ring slot is, in `RerunLogWriter.append`'s order."""
+
+    step: int
+    time: float           # s
+    position: np.ndarray  # (n, 2) m, world
+    angle: np.ndarray     # (n,) rad, CCW
+    exists: np.ndarray    # (n,) bool
+    point: np.ndarray     # (m, 2) m, world
+    normal: np.ndarray    # (m, 2) unit, from a towards b
+    impulse: np.ndarray   # (m,) N s
+    push_a: np.ndarray    # (m, 2) m
+    push_b: np.ndarray    # (m, 2) m
+    stats: np.ndarray     # (9,) the /stats values in STAT_KEYS order
+
+
+def read_rerun_frame(buf: np.ndarray, at: int = 0) -> RerunFrame:
+    """The Rerun frame at byte ``at`` (a multiple of 8) of ``buf`` (uint8), as views."""
+    from recorder.pack import RERUN_HEAD, rerun_offsets
+
+    head = buf[at:at + 8 * RERUN_HEAD].view(np.int64)
+    step, n, m = int(head[0]), int(head[2]), int(head[3])
+    o = rerun_offsets(n, m)
+    words = buf[at:at + 8 * o[-1]].view(np.float64)
+    pairs = lambda k, rows: words[o[k]:o[k] + 2 * rows].reshape(rows, 2)  # noqa: E731
+    return RerunFrame(step, float(words[1]), pairs(0, n), words[o[1]:o[1] + n],
+                      buf[at + 8 * o[2]:at + 8 * o[2] + n].view(np.bool_), pairs(3, m),
+                      pairs(4, m), words[o[5]:o[5] + m], pairs(6, m), pairs(7, m),
+                      words[4:RERUN_HEAD])
 
 
 def pack(record: StepRecord, stats: dict) -> bytes:
@@ -327,6 +372,9 @@ class WriterProcess:
         self._gravity = tuple(float(g) for g in config["gravity"])
         # the compiled encoder writes the host's byte order: little-endian only
         self._compiled = sys.byteorder == "little"
+        if kind == "rerun":  # native byte order: both ends are on this machine
+            from recorder.pack import pack_rerun, rerun_offsets
+            self._pack_rerun, self._rerun_offsets = pack_rerun, rerun_offsets
         os.set_blocking(self._rep, False)
         payload = pickle.dumps({"kind": kind, "path": self.path, **config},
                                protocol=pickle.HIGHEST_PROTOCOL)
@@ -343,9 +391,20 @@ class WriterProcess:
         Returns False, sending nothing, when a float of the record is NaN or infinite (the
         caller says which: `recorder.recording.check_finite`).
         """
+        if self.kind == "rerun":
+            return self._write_rerun(record, stats)
         bodies_size, contacts_size, size = _sizes(record)
         if size > self.capacity or not self._compiled:
             return self._write_inline(record, stats)
+        pos, end = self._reserve(size)
+        if not self._compiled_pack(pos, record, stats, bodies_size, contacts_size):
+            return False
+        self._announce(pos, size, end)
+        return True
+
+    def _reserve(self, size: int) -> tuple[int, int]:
+        """Where the next frame of ``size`` bytes goes: its offset in the ring and its end in
+        bytes handed out; waits while the child still holds that part of the ring."""
         pos = self.head % self.capacity
         head = self.head
         if pos + size > self.capacity:
@@ -355,12 +414,40 @@ class WriterProcess:
             self._notify()
             while head + size - self.released > self.capacity:
                 self._pump(block=True)
-        if not self._compiled_pack(pos, record, stats, bodies_size, contacts_size):
-            return False
-        self.head = head + size
-        self._pending += _COMMAND.pack(b"F", pos, size, self.head)
+        return pos, head + size
+
+    def _announce(self, pos: int, size: int, end: int) -> None:
+        self.head = end
+        self._pending += _COMMAND.pack(b"F", pos, size, end)
         if len(self._pending) >= NOTIFY_EVERY * _COMMAND.size:
             self._notify()
+
+    def _write_rerun(self, record: StepRecord, stats: dict | None) -> bool:
+        """The Rerun writer's share: one compiled pass (`recorder.pack.pack_rerun`) copies what
+        it draws into the ring, checks every float and sums the stats."""
+        n, m = int(record.angle.shape[0]), len(record.contacts)
+        size = 8 * self._rerun_offsets(n, m)[-1]
+        inline = size > self.capacity
+        if inline:
+            buf, pos = np.empty(size, dtype=np.uint8), 0
+        else:
+            (pos, end), buf = self._reserve(size), self._ring_u8
+        c = record.contacts
+        model = self._stats_model
+        if self._pack_rerun(buf, pos, int(record.step), float(record.time), record.position,
+                            record.angle, record.exists, record.velocity,
+                            record.angular_velocity, c.point, c.normal, c.depth, c.push_a,
+                            c.push_b, c.impulse, c.tangent_impulse, c.restitution, model.mass,
+                            model.inertia, model.concrete, *self._gravity) >= 0:
+            return False
+        if stats is not None:
+            words = buf[pos + 32:pos + 32 + 8 * len(STAT_KEYS)].view(np.float64)
+            words[:] = [float(stats[k]) for k in STAT_KEYS]
+        if inline:
+            self._notify()
+            self._send(b"I", size, payload=buf.tobytes())
+        else:
+            self._announce(pos, size, end)
         return True
 
     def _write_inline(self, record: StepRecord, stats: dict | None) -> bool:
@@ -555,13 +642,26 @@ class _Namespace:
 
 
 class _FrameWriter:
-    """Feeds frames to a writer: the MCAP writer takes the encoded messages as they are; the
-    Rerun writer (and MCAP with the Foxglove channel) gets the decoded record."""
+    """Feeds frames to a writer: the MCAP writer takes the encoded messages as they are (with
+    the Foxglove channel, the decoded record); the Rerun writer copies a `RerunFrame`'s arrays
+    into its batch (`RerunLogWriter.append`)."""
 
-    def __init__(self, writer, encoded: bool) -> None:
+    def __init__(self, writer, kind: str, encoded: bool) -> None:
         self.writer, self.encoded = writer, encoded
+        self.raw = kind == "rerun"  # frames of `recorder.pack.pack_rerun`
 
-    def write(self, frame: Frame) -> None:
+    def write(self, data, at: int = 0, length: int | None = None) -> None:
+        """The frame at byte ``at`` of ``data`` (the ring or an inline frame's bytes)."""
+        if self.raw:
+            self.writer.append(*read_rerun_frame(data, at))
+            return
+        if length is None:
+            self._write_frame(Frame(data))
+        else:
+            with memoryview(data)[at:at + length] as view:
+                self._write_frame(Frame(view))
+
+    def _write_frame(self, frame: Frame) -> None:
         if self.encoded:
             self.writer.write_messages(frame.step, frame.time, frame.exists(), frame.bodies,
                                        frame.contacts,
@@ -575,7 +675,7 @@ class _FrameWriter:
 
 def _make_writer(config: dict):
     encoded = config["kind"] == "mcap" and not config.get("foxglove")
-    return _FrameWriter(_make_bare_writer(config), encoded)
+    return _FrameWriter(_make_bare_writer(config), config["kind"], encoded)
 
 
 def _make_bare_writer(config: dict):
@@ -637,6 +737,7 @@ def child_main(argv: list[str]) -> int:
     cmd_fd, rep_fd, ring_fd, ring_bytes = (int(x) for x in argv)
     commands = _PolledReader(cmd_fd)
     ring = _map(ring_fd, ring_bytes)
+    ring_u8 = np.frombuffer(ring, dtype=np.uint8)
     os.close(ring_fd)
 
     def reply(kind: bytes, value: int = 0, body: bytes = b"") -> None:
@@ -661,13 +762,13 @@ def child_main(argv: list[str]) -> int:
                 return 0
             kind, a, b, c = _COMMAND.unpack(head)
             if kind == b"F":
-                # read in place (the mcap library copies what it keeps); the slot goes back to
-                # the parent once the step is written
-                with memoryview(ring)[a:a + b] as data:
-                    writer.write(Frame(data))
+                # read in place (the mcap library copies what it keeps, the Rerun writer copies
+                # into its batch); the slot goes back to the parent once the step is taken
+                writer.write(ring_u8 if writer.raw else ring, a, b)
                 reply(b"R", c)
             elif kind == b"I":
-                writer.write(Frame(commands.read(a)))
+                data = commands.read(a)
+                writer.write(np.frombuffer(data, dtype=np.uint8) if writer.raw else data)
             elif kind == b"S":
                 settle = getattr(writer, "settle", None)
                 if b and settle is not None:

@@ -101,6 +101,132 @@ def test_the_compiled_encoder_refuses_a_nan_or_infinity_in_any_float_field(field
     assert bad_field == (BODY_FIELDS + CONTACT_FIELDS).index(field)
 
 
+def _rerun_packer(ring, sim):
+    """A Rerun WriterProcess's packing half, without a child."""
+    from recorder.pack import pack_rerun, rerun_offsets
+
+    proc = _packer(ring, sim)
+    proc.kind, proc.capacity, proc.head, proc.released = "rerun", ring.size, 0, 0
+    proc._pending = bytearray()
+    proc._pack_rerun, proc._rerun_offsets = pack_rerun, rerun_offsets
+    return proc
+
+
+_RERUN_FIELDS = ("position", "angle", "exists", "point", "normal", "impulse", "push_a",
+                 "push_b")
+
+
+def test_the_rerun_frame_round_trips_every_field_bit_for_bit():
+    from recorder.pack import pack_rerun
+
+    sim, records = _records(n=13, steps=30, leave_at=20)  # 13: exists bytes end mid-word
+    assert len(records[0].contacts) == 0  # step 0: no contact arrays
+    r = records[7]
+    position = r.position.copy()
+    position[2] = (-0.0, 5e-324)  # the sign of zero and a subnormal survive
+    records[7] = dataclasses.replace(r, position=position)
+    ring = np.full(1 << 16, 0xAB, dtype=np.uint8)  # leftover bytes must not leak into values
+    model = _packer(ring, sim)._stats_model
+    for r in records:
+        c = r.contacts
+        assert pack_rerun(ring, 24, r.step, r.time, r.position, r.angle, r.exists, r.velocity,
+                          r.angular_velocity, c.point, c.normal, c.depth, c.push_a, c.push_b,
+                          c.impulse, c.tangent_impulse, c.restitution, model.mass,
+                          model.inertia, model.concrete, 0.0, -9.81) == -1
+        frame = W.read_rerun_frame(ring, 24)
+        assert (frame.step, frame.time) == (r.step, r.time)
+        for name in _RERUN_FIELDS:
+            want = getattr(r, name) if hasattr(r, name) else getattr(c, name)
+            got = getattr(frame, name)
+            assert got.shape == want.shape and got.dtype == want.dtype, name
+            assert got.tobytes() == np.ascontiguousarray(want).tobytes(), name
+        stats = compute_stats(sim.model, (0.0, -9.81), r, with_hash=False)
+        assert dict(zip(W.STAT_KEYS, frame.stats.tolist())) == stats  # the same sums
+        assert W.rerun_frame_size(r) % 8 == 0
+
+
+_FLOAT_FIELDS = ("position", "angle", "velocity", "angular_velocity", "point", "normal",
+                 "depth", "push_a", "push_b", "impulse", "tangent_impulse", "restitution")
+
+
+@pytest.mark.parametrize("field", _FLOAT_FIELDS)
+@pytest.mark.parametrize("bad", [np.nan, np.inf, -np.inf])
+def test_the_rerun_frame_refuses_a_nan_or_infinity_in_any_float_field(field, bad):
+    from recorder.pack import BODY_FIELDS, CONTACT_FIELDS
+
+    sim, records = _records(steps=3)
+    r = records[-1]
+    if hasattr(r, field):
+        arr = getattr(r, field).copy()
+        arr.flat[arr.size - 1] = bad
+        r = dataclasses.replace(r, **{field: arr})
+    else:
+        arr = getattr(r.contacts, field).copy()
+        arr.flat[0] = bad
+        r = dataclasses.replace(r, contacts=dataclasses.replace(r.contacts, **{field: arr}))
+    ring = np.zeros(1 << 16, dtype=np.uint8)
+    proc = _rerun_packer(ring, sim)
+    assert proc.write(records[1]) is True  # a good step is handed out ...
+    head, pending = proc.head, bytes(proc._pending)
+    assert proc.write(r) is False  # ... a bad one is not: nothing more announced
+    assert (proc.head, bytes(proc._pending)) == (head, pending)
+    c = r.contacts
+    model = proc._stats_model
+    got = proc._pack_rerun(ring, 0, r.step, r.time, r.position, r.angle, r.exists, r.velocity,
+                           r.angular_velocity, c.point, c.normal, c.depth, c.push_a, c.push_b,
+                           c.impulse, c.tangent_impulse, c.restitution, model.mass,
+                           model.inertia, model.concrete, 0.0, -9.81)
+    assert got == (BODY_FIELDS + CONTACT_FIELDS).index(field)
+
+
+def _rrd_content(path):
+    """Every chunk's columns per entity and set of columns, without row ids and wall-clock
+    times."""
+    import pyarrow as pa
+    from rerun.chunk import RrdReader
+
+    out = {}
+    for chunk in RrdReader(str(path)).stream():
+        batch = chunk.to_record_batch()
+        cols = {}
+        for name in batch.schema.names:
+            if "rowid" in name.lower().replace("_", "") or name in (
+                    "log_time", "RecordingInfo:start_time"):
+                continue
+            col = batch.column(name)
+            cols[name] = col.cast(pa.int64()) if pa.types.is_duration(col.type) else col
+        out.setdefault((chunk.entity_path, tuple(sorted(cols))), []).append(cols)
+    return out
+
+
+# 5,424-byte frames (40 bodies, 60 contact rows): 8 KiB holds one at a time (every step
+# waits for the child and wraps), 4 KiB none (every step but step 0 goes inline)
+@pytest.mark.parametrize("ring_bytes", [None, 8192, 4096])
+def test_the_rerun_writer_process_writes_what_writing_in_process_does(tmp_path, ring_bytes):
+    sim, records = _records(n=40, contacts=60, steps=150, leave_at=70)
+    assert W.rerun_frame_size(records[5]) == 5424
+    paths = {}
+    for offload in ("none", "process"):
+        path = tmp_path / f"{offload}.rrd"
+        rec = Recorder(sim, rrd_path=str(path), scene_text=SCENE_TEXT, offload=offload)
+        if offload == "process" and ring_bytes is not None:
+            config = {"model": W.model_table(rec.model), "gravity": rec.gravity,
+                      "scene": {"name": str(rec.scene.name), "dt": float(rec.scene.world.dt)},
+                      "impulse_scale": None}
+            rec.rerun.close()
+            rec.rerun = W.WriterProcess("rerun", str(path), config, ring_bytes=ring_bytes)
+        for r in records:
+            rec.write(r)
+        rec.close()
+        paths[offload] = path
+    a, b = _rrd_content(paths["none"]), _rrd_content(paths["process"])
+    assert sorted(a) == sorted(b)
+    for key in a:
+        assert len(a[key]) == len(b[key]), key
+        for x, y in zip(a[key], b[key]):
+            assert all(x[k].equals(y[k]) for k in x), key
+
+
 @pytest.mark.parametrize("ring_bytes", [None, 64 * 1024])  # the second forces wraps and waits
 def test_writer_processes_write_the_same_bytes_as_writing_in_process(tmp_path, ring_bytes):
     sim, records = _records(n=30, contacts=20, steps=160, leave_at=70)
