@@ -57,7 +57,6 @@ def default_scales(model) -> tuple[float, float]:
     return char_len / max(m_med * 1.0, 1e-12), 0.5 * char_len
 
 
-_EMPTY2 = np.zeros((0, 2), dtype=np.float32)
 _STRIP_TYPE = rr.components.LineStrip2DBatch._ARROW_DATATYPE
 
 
@@ -75,15 +74,35 @@ def _strips_arrow(points: np.ndarray, lengths: np.ndarray) -> pa.Array:
     return pa.ListArray.from_arrays(pa.array(offsets), inner, type=_STRIP_TYPE)
 
 
-def _load_kernels() -> None:
-    """Import and load the compiled batch kernels now (about 1 s the first time in a process),
-    so that the first batch of a run does not wait for them."""
-    from recorder.rerun_batch import contact_arrows, outlines
+def _column(descriptor, batch_type, values: pa.Array, counts: np.ndarray) -> rr.ComponentColumn:
+    """A `send_columns` column of ``values`` (arrow, already of ``batch_type``'s type) with
+    ``counts[k]`` of them at step k: what ``rr.<Archetype>.columns(...).partition(counts)``
+    builds, without Rerun converting the data again in Python."""
+    offsets = np.zeros(len(counts) + 1, dtype=np.int32)
+    np.cumsum(counts, out=offsets[1:])
+    return rr.ComponentColumn(descriptor, batch_type(values), offsets=offsets)
 
-    outlines(np.zeros((1, 1)), np.zeros((1, 1, 2)), np.zeros(1, dtype=np.int64),
-             np.zeros((1, 2, 2)), np.ones(1, dtype=np.int64))
-    z2 = np.zeros((1, 2))
-    contact_arrows(np.ones(1, dtype=np.int64), z2, z2, np.zeros(1), z2, z2, 1.0, 1.0)
+
+def _vec2(points: np.ndarray) -> pa.Array:
+    """(k, 2) float32 as Rerun's Vec2D arrow array (fixed-size lists of 2), without a copy."""
+    return pa.FixedSizeListArray.from_arrays(pa.array(points.reshape(-1)),
+                                             type=_VEC2_TYPE)
+
+
+_VEC2_TYPE = rr.components.Position2DBatch._ARROW_DATATYPE
+assert _VEC2_TYPE == rr.components.Vector2DBatch._ARROW_DATATYPE
+
+
+def _load_kernels() -> None:
+    """Import and load the compiled step kernels now (about 1 s the first time in a process),
+    so that the first steps of a run do not wait for them."""
+    from recorder.rerun_batch import step_arrays, step_outlines
+
+    z1, z2, f2 = np.zeros(1), np.zeros((1, 2)), np.zeros((4, 2), dtype=np.float32)
+    one = np.ones(1, dtype=np.int64)
+    step_outlines(z1, z2, np.zeros(1, dtype=np.int64), np.zeros((1, 2, 2)), one, f2, 0)
+    step_arrays(z1, z2, np.zeros(1, dtype=np.int64), np.zeros((1, 2, 2)), one, f2, 0, z2, z2,
+                z1, z2, z2, 1.0, 1.0, f2, f2, f2, 0, f2, f2, 0)
 
 
 class RerunLogWriter:
@@ -144,44 +163,56 @@ class RerunLogWriter:
             static=True)
 
     def _reset(self) -> None:
-        """Start an empty batch (the buffers are kept and reused)."""
+        """Start an empty batch."""
         self._count = 0  # steps in the batch
-        self._rows = 0  # contact rows in the batch
         self._steps: list[int] = []
         self._times: list[float] = []
         self._moving: list[np.ndarray] = []  # moving bodies' indices per step (shared)
         self._stats_rows: list[int] = []  # the batch's steps that came with stats
+        self._buffers_sent = True  # Rerun may still read the last batch's arrays: new ones
 
-    def _allocate(self, n: int) -> None:
-        """Per-batch buffers for n bodies; the contact rows grow as needed (`_grow`)."""
+    def _new_buffers(self) -> None:
+        """Fresh float32 arrays for a batch, sized like the last one's (they grow as needed);
+        fresh because Rerun takes the arrays it is sent without copying and encodes them
+        later, in its own threads."""
         b = self.batch
-        self._angle = np.empty((b, n))  # rad
-        self._position = np.empty((b, n, 2))  # m, world
-        self._stats = np.empty((b, len(STAT_NAMES)))
-        self._counts = np.zeros(b, dtype=np.int64)  # contact rows per step
-        self._contact_cap = 0
-        self._grow(4 * n * b)  # a pile has 1-3 rows per body: rarely grown
+        if not hasattr(self, "_stats"):
+            self._stats = np.empty((b, len(STAT_NAMES)))
+            self._counts = np.zeros(b, dtype=np.int64)  # contact rows per step
+            self._push_counts = np.zeros(b, dtype=np.int64)  # push arrows per step
+            self._strip_cap = b * self._strip_points
+            self._row_cap = 0
+        self._strips = np.empty((self._strip_cap, 2), dtype=np.float32)  # outline points, m
+        self._points = np.empty((self._row_cap, 2), dtype=np.float32)  # m
+        self._normals = np.empty((self._row_cap, 2), dtype=np.float32)  # m of arrow
+        self._impulses = np.empty((self._row_cap, 2), dtype=np.float32)  # m of arrow
+        self._push_pt = np.empty((2 * self._row_cap, 2), dtype=np.float32)  # m
+        self._push_v = np.empty((2 * self._row_cap, 2), dtype=np.float32)  # m
+        self._strip_at = self._row_at = self._push_at = 0
+        self._buffers_sent = False
 
-    def _grow(self, rows: int) -> None:
-        """Room for ``rows`` contact rows in the batch, keeping the ones buffered."""
-        cap = max(rows, 2 * self._contact_cap)
-        old = getattr(self, "_point", None)
-        for name, shape in (("_point", (cap, 2)), ("_normal", (cap, 2)), ("_impulse", (cap,)),
-                            ("_push_a", (cap, 2)), ("_push_b", (cap, 2))):
-            new = np.empty(shape)
-            if old is not None:
-                new[:self._rows] = getattr(self, name)[:self._rows]
-            setattr(self, name, new)
-        self._contact_cap = cap
+    def _grow(self, strips: int, rows: int) -> None:
+        """Room for ``strips`` outline points and ``rows`` contact rows (twice as many push
+        arrows) in the batch, keeping what is buffered."""
+        def grown(old, used, cap):
+            new = np.empty((cap, 2), dtype=np.float32)
+            new[:used] = old[:used]
+            return new
 
-    def _batch_strips(self) -> tuple[np.ndarray, np.ndarray, list[int]]:
-        """Closed float32 outlines of the buffered steps: their points (one strip after the
-        other, no padding), the points per strip, and the strips per step; one compiled pass per
-        run of steps with the same moving bodies."""
-        from recorder.rerun_batch import outlines
+        if strips > self._strip_cap:
+            self._strip_cap = max(strips, 2 * self._strip_cap)
+            self._strips = grown(self._strips, self._strip_at, self._strip_cap)
+        if rows > self._row_cap:
+            self._row_cap = cap = max(rows, 2 * self._row_cap)
+            for name in ("_points", "_normals", "_impulses"):
+                setattr(self, name, grown(getattr(self, name), self._row_at, cap))
+            for name in ("_push_pt", "_push_v"):
+                setattr(self, name, grown(getattr(self, name), self._push_at, 2 * cap))
 
+    def _strip_lengths(self) -> tuple[np.ndarray, list[int]]:
+        """Points per outline strip over the batch, and strips per step."""
         moving, count = self._moving, self._count
-        points, lengths, counts = [], [], []
+        lengths, counts = [], []
         i = 0
         while i < count:
             idx = moving[i]
@@ -189,28 +220,23 @@ class RerunLogWriter:
             while j < count and moving[j] is idx:
                 j += 1
             counts.extend([idx.size] * (j - i))
-            if idx.size:
-                points.append(outlines(self._angle[i:j], self._position[i:j], idx,
-                                       self.vertices_local, self.vertex_count))
-                lengths.append(np.tile(self.vertex_count[idx] + 1, j - i))
+            lengths.append(np.tile(self.vertex_count[idx] + 1, j - i))
             i = j
-        if not points:
-            return _EMPTY2, np.zeros(0, dtype=np.int64), counts
-        if len(points) == 1:
-            return points[0], lengths[0], counts
-        return np.concatenate(points), np.concatenate(lengths), counts
+        return np.concatenate(lengths), counts
 
     def _outlines(self, angle: np.ndarray, position: np.ndarray,
                   mask: np.ndarray) -> list[np.ndarray]:
         """Closed float32 world outlines of the bodies in ``mask`` (one (c + 1, 2) array each),
-        by the batches' kernel."""
-        from recorder.rerun_batch import outlines
+        by the steps' kernel."""
+        from recorder.rerun_batch import step_outlines
 
         idx = np.flatnonzero(mask)
-        points = outlines(np.ascontiguousarray(angle, dtype=np.float64)[None],
-                          np.ascontiguousarray(position, dtype=np.float64)[None], idx,
-                          self.vertices_local, self.vertex_count)
-        return np.split(points, np.cumsum(self.vertex_count[idx] + 1)[:-1])
+        sizes = self.vertex_count[idx] + 1
+        points = np.empty((int(sizes.sum()), 2), dtype=np.float32)
+        step_outlines(np.ascontiguousarray(angle, dtype=np.float64),
+                      np.ascontiguousarray(position, dtype=np.float64), idx,
+                      self.vertices_local, self.vertex_count, points, 0)
+        return np.split(points, np.cumsum(sizes)[:-1])
 
     def write(self, record: StepRecord, stats: dict | None = None) -> None:
         """Buffer one step (its `/stats` values without the hash, or None to leave them out);
@@ -224,13 +250,16 @@ class RerunLogWriter:
     def append(self, step: int, time: float, position: np.ndarray, angle: np.ndarray,
                exists: np.ndarray, point: np.ndarray, normal: np.ndarray, impulse: np.ndarray,
                push_a: np.ndarray, push_b: np.ndarray, stats: np.ndarray | None) -> None:
-        """Buffer one step, copying its arrays (they may be reused once this returns).
+        """Buffer one step: what it draws is computed now (`recorder.rerun_batch.step_arrays`)
+        into the batch's float32 buffers, so the arrays given may be reused once this returns.
 
         position (n, 2) m and angle (n,) rad, world; exists (n,) bool; per contact row: point
         (m, 2) m, unit normal (m, 2) from a to b, impulse (m,) N s, push_a, push_b (m, 2) m;
         stats: the nine `/stats` values in STAT_NAMES order, or None. `write` and the Rerun
         writer process (`recorder.writer_process.RerunFrame`) both come here.
         """
+        from recorder.rerun_batch import step_arrays
+
         rec = self.rec
         exists = np.asarray(exists, dtype=bool)
         if not self._static_done:
@@ -240,7 +269,6 @@ class RerunLogWriter:
                     self._outlines(angle, position, concrete), colors=[_CONCRETE], radii=[-1.5],
                     labels=[self.names[k] for k in np.flatnonzero(concrete)]), static=True)
             self._static_done = True
-            self._allocate(int(exists.shape[0]))
         moving = exists & self._not_concrete
         key = moving.tobytes()
         if key != self._last_labels_key:
@@ -253,26 +281,26 @@ class RerunLogWriter:
         if key != self._moving_key:
             self._moving_key = key
             self._moving_index = np.flatnonzero(moving)
+            self._strip_points = int(np.sum(self.vertex_count[self._moving_index] + 1))
+        if self._buffers_sent:
+            self._new_buffers()
         k = self._count
         self._steps.append(int(step))
         self._times.append(float(time))
         self._moving.append(self._moving_index)
-        # the outlines and arrows of a whole batch are computed in _send from these buffers,
-        # a few compiled passes per batch instead of per step
-        self._angle[k] = angle
-        self._position[k] = position
         m = int(impulse.shape[0])
+        if (self._strip_at + self._strip_points > self._strip_cap
+                or self._row_at + m > self._row_cap):
+            self._grow(self._strip_at + self._strip_points, self._row_at + m)
+        push_at = self._push_at
+        self._strip_at, self._push_at = step_arrays(
+            angle, position, self._moving_index, self.vertices_local, self.vertex_count,
+            self._strips, self._strip_at, point, normal, impulse, push_a, push_b,
+            self.normal_length, self.impulse_scale, self._points, self._normals,
+            self._impulses, self._row_at, self._push_pt, self._push_v, push_at)
+        self._row_at += m
         self._counts[k] = m
-        if m:
-            lo = self._rows
-            if lo + m > self._contact_cap:
-                self._grow(lo + m)
-            self._point[lo:lo + m] = point
-            self._normal[lo:lo + m] = normal
-            self._impulse[lo:lo + m] = impulse
-            self._push_a[lo:lo + m] = push_a
-            self._push_b[lo:lo + m] = push_b
-            self._rows = lo + m
+        self._push_counts[k] = self._push_at - push_at
         if stats is not None:
             self._stats[k] = stats
             self._stats_rows.append(k)
@@ -284,35 +312,31 @@ class RerunLogWriter:
         if not self._count:
             return
         rec = self.rec
-        count, rows = self._count, self._rows
+        count, rows, pushes = self._count, self._row_at, self._push_at
         times = [rr.TimeColumn("step", sequence=self._steps),
                  rr.TimeColumn("sim_time", duration=self._times)]
-        points, lengths, strip_counts = self._batch_strips()
-        rec.send_columns("world/bodies/moving", indexes=times,
-                         columns=rr.LineStrips2D.columns(
-                             strips=_strips_arrow(points, lengths)).partition(strip_counts))
+        lengths, strip_counts = self._strip_lengths()
+        rec.send_columns("world/bodies/moving", indexes=times, columns=[_column(
+            rr.LineStrips2D.descriptor_strips(), rr.components.LineStrip2DBatch,
+            _strips_arrow(self._strips[:self._strip_at], lengths), strip_counts)])
         counts = self._counts[:count]
-        if rows:
-            from recorder.rerun_batch import contact_arrows
-
-            points, normals, impulses, push_pt, push_v, push_counts = contact_arrows(
-                counts, self._point[:rows], self._normal[:rows], self._impulse[:rows],
-                self._push_a[:rows], self._push_b[:rows], self.normal_length,
-                self.impulse_scale)
-        else:
-            points = normals = impulses = push_pt = push_v = _EMPTY2
-            push_counts = np.zeros(count, dtype=np.int64)
-        rec.send_columns("world/contacts", indexes=times,
-                         columns=rr.Points2D.columns(positions=points).partition(counts))
-        rec.send_columns("world/normals", indexes=times,
-                         columns=rr.Arrows2D.columns(origins=points, vectors=normals)
-                         .partition(counts))
-        rec.send_columns("world/impulses", indexes=times,
-                         columns=rr.Arrows2D.columns(origins=points, vectors=impulses)
-                         .partition(counts))
-        rec.send_columns("world/push", indexes=times,
-                         columns=rr.Arrows2D.columns(origins=push_pt, vectors=push_v)
-                         .partition(push_counts))
+        points = _vec2(self._points[:rows])
+        rec.send_columns("world/contacts", indexes=times, columns=[_column(
+            rr.Points2D.descriptor_positions(), rr.components.Position2DBatch, points, counts)])
+        # the order Arrows2D.columns gives: vectors, then origins
+        for entity, vectors in (("world/normals", self._normals),
+                                ("world/impulses", self._impulses)):
+            rec.send_columns(entity, indexes=times, columns=[
+                _column(rr.Arrows2D.descriptor_vectors(), rr.components.Vector2DBatch,
+                        _vec2(vectors[:rows]), counts),
+                _column(rr.Arrows2D.descriptor_origins(), rr.components.Position2DBatch,
+                        points, counts)])
+        push_counts = self._push_counts[:count]
+        rec.send_columns("world/push", indexes=times, columns=[
+            _column(rr.Arrows2D.descriptor_vectors(), rr.components.Vector2DBatch,
+                    _vec2(self._push_v[:pushes]), push_counts),
+            _column(rr.Arrows2D.descriptor_origins(), rr.components.Position2DBatch,
+                    _vec2(self._push_pt[:pushes]), push_counts)])
         with_stats = self._stats_rows
         if with_stats:
             stat_times = times
@@ -321,9 +345,11 @@ class RerunLogWriter:
                               rr.TimeColumn("sim_time",
                                             duration=[self._times[k] for k in with_stats])]
             values = self._stats[with_stats]
+            ones = np.ones(len(with_stats), dtype=np.int64)
             for j, name in enumerate(STAT_NAMES):
-                rec.send_columns(f"stats/{name}", indexes=stat_times,
-                                 columns=rr.Scalars.columns(scalars=values[:, j].copy()))
+                rec.send_columns(f"stats/{name}", indexes=stat_times, columns=[_column(
+                    rr.Scalars.descriptor_scalars(), rr.components.ScalarBatch,
+                    pa.array(values[:, j].copy()), ones)])
         self._reset()
 
     def settle(self) -> None:
