@@ -102,7 +102,7 @@ def run(scene_name: str, preset: str, out_dir: str, reps: int, steps: int) -> di
     bench = build(scene_name)
     scene = with_preset(bench.scene, preset)
     result: dict = {"kind": "recording", "scene": scene_name, "engine": f"isaac-{preset}",
-                    "steps": steps, "reps": reps, "notes": []}
+                    "bodies": len(scene.bodies), "steps": steps, "reps": reps, "notes": []}
     modes = {"plain": {}}
     missing = _available("recorder")
     if missing:

@@ -58,6 +58,11 @@ TARGETS = (
     ("startup_cached_s", None, 1.5),
     ("startup_first_s", None, 15.0),
 )
+# the recorder issue's targets (overhead on top of the simulation alone, a fraction) and the
+# replay issue's (replay loop time per step over that of the run that wrote the log), measured
+# on the recording scenes with the preset named in the recording rows
+RECORDING_TARGETS = (("mcap", 0.25), ("rerun", 0.50))
+REPLAY_TARGET = 1.2
 
 
 def log(msg: str) -> None:
@@ -232,7 +237,8 @@ def recording(preset: str, reps: int, steps: int, scene: str) -> dict:
 
 # ---- targets --------------------------------------------------------------------------------
 
-def check_targets(rows, growth_rows, startup_rows, isaac_engines) -> list[dict]:
+def check_targets(rows, growth_rows, startup_rows, isaac_engines,
+                  recordings=()) -> list[dict]:
     out = []
     for engine in isaac_engines:
         for what, scene, limit in TARGETS:
@@ -251,6 +257,18 @@ def check_targets(rows, growth_rows, startup_rows, isaac_engines) -> list[dict]:
                          else "first-run compile, start-up to first step (s)")
             out.append(dict(kind="target", engine=engine, what=label, limit=limit, value=value,
                             met=None if value is None else bool(value <= limit)))
+    for rec in recordings:
+        if "error" in rec:
+            continue
+        frac = rec.get("overhead_fraction", {})
+        checks = [(f"{mode.upper() if mode == 'mcap' else 'Rerun'} recording overhead, "
+                   f"{rec['scene']} (fraction)", limit, frac.get(mode))
+                  for mode, limit in RECORDING_TARGETS]
+        checks.append((f"replay time / recorded run's, {rec['scene']}", REPLAY_TARGET,
+                       rec.get("replay", {}).get("time_ratio_to_recorded_run")))
+        for label, limit, value in checks:
+            out.append(dict(kind="target", engine=rec["engine"], what=label, limit=limit,
+                            value=value, met=None if value is None else bool(value <= limit)))
     return out
 
 
@@ -331,15 +349,17 @@ def markdown(meta, rows, growth_rows, startup_rows, recs, targets) -> str:
                       "writers have taken every step); opening and closing the files are one-off "
                       "costs, shown apart:", "",
                       "| mode | ms/step | steps/s | overhead ms/step | overhead | bytes/step "
-                      "| open, s | close, s |",
-                      "|---|---|---|---|---|---|---|---|"]
+                      "| bytes/body-step | open, s | close, s |",
+                      "|---|---|---|---|---|---|---|---|---|"]
             for mode, v in ms.items():
                 size = rec.get(f"{mode}_bytes_per_step")
                 extra = over.get(mode)
                 share = f"{100 * frac[mode]:.0f} %" if mode in frac else "–"
                 rate = f"{1000 / v:.0f}" if v else "–"
+                per_body = size / rec["bodies"] if size and rec.get("bodies") else None
                 lines.append(f"| {mode} | {fmt(v)} | {rate} | {fmt(extra)} | {share} | "
-                             f"{fmt(size) if size else '–'} | {fmt(opened.get(mode))} | "
+                             f"{fmt(size) if size else '–'} | {fmt(per_body)} | "
+                             f"{fmt(opened.get(mode))} | "
                              f"{fmt(closed.get(mode))} |")
             rp = rec.get("replay", {})
             if "steps_per_s" in rp:
@@ -484,7 +504,7 @@ def main(argv: list[str] | None = None) -> int:
         for scene, steps in RECORDING_SCENES:
             recs.append(recording(preset, reps=5, steps=steps, scene=scene))
             log(f"  recording: {recs[-1]}")
-    targets = check_targets(rows, growth_rows, startup_rows, isaac_engines)
+    targets = check_targets(rows, growth_rows, startup_rows, isaac_engines, recs)
 
     meta = meta_info(reps, skipped)
     meta["elapsed_s"] = time.perf_counter() - t_start

@@ -39,7 +39,7 @@ from recorder.mcap_writer import (build_metadata, encode_bodies, encode_contacts
                                   encode_world)
 from recorder.reader import record_from_messages
 from recorder.recording import compute_stats
-from replay.reader import RawLog, RawStep
+from replay.reader import Prefetch, RawLog, RawStep
 from replay.report import DEFAULT_MAX_REPORTED, Divergence, Report
 
 # metadata keys whose difference voids the promise of bit-identical results
@@ -431,7 +431,8 @@ def replay_log(path: str, *, from_step: int | None = None, to_step: int | None =
     last_exists: np.ndarray | None = None
     last_step: int | None = None
     go_on = all_steps or tolerance is not None
-    steps = log.steps(start=from_step or 0, stop=to_step)
+    # read ahead in a thread while the engine steps (replay.reader.Prefetch)
+    steps = Prefetch(log.steps(start=from_step or 0, stop=to_step))
     try:
         for raw in steps:
             last_step = raw.step

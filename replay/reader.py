@@ -193,3 +193,68 @@ class RawLog:
                 yield current
             else:
                 self.incomplete_tail = current.step
+
+
+class Prefetch:
+    """Iterate `items` in a thread of its own, up to `depth` items ahead of the consumer.
+
+    Why: a replay's reading (file reads, chunk CRCs, slicing messages out of chunks) is ~0.1 ms
+    per step of the 500-body pile, a fifth of the step it checks; file reads and ``zlib.crc32``
+    release the GIL, as do the engine's kernels (``nogil``), so the two overlap. Items arrive in
+    the same order; an exception raised by `items` is raised by ``next`` at the same place in
+    the sequence. ``close()`` stops the thread (and closes `items`) early.
+    """
+
+    _END = object()
+
+    def __init__(self, items, depth: int = 16) -> None:
+        import queue
+        import threading
+
+        self._items = items
+        self._queue: queue.Queue = queue.Queue(maxsize=depth)
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, name="isaac-replay-reader",
+                                        daemon=True)
+        self._done = False
+        self._thread.start()
+
+    def _run(self) -> None:
+        try:
+            for item in self._items:
+                if self._stop.is_set():
+                    return
+                self._queue.put((item, None))
+            self._queue.put((self._END, None))
+        except BaseException as exc:  # noqa: BLE001 - handed to the consumer, raised there
+            self._queue.put((self._END, exc))
+
+    def __iter__(self) -> "Prefetch":
+        return self
+
+    def __next__(self):
+        if self._done:
+            raise StopIteration
+        item, exc = self._queue.get()
+        if item is self._END:
+            self._done = True
+            self._thread.join()
+            if exc is not None:
+                raise exc
+            raise StopIteration
+        return item
+
+    def close(self) -> None:
+        """Stop reading ahead; the thread ends after the item it is working on."""
+        if not self._done:
+            self._done = True
+            self._stop.set()
+            while self._thread.is_alive():
+                try:  # make room for an item the thread is blocked putting
+                    self._queue.get(timeout=0.05)
+                except Exception:  # noqa: BLE001 - queue.Empty: it may be finishing
+                    pass
+            self._thread.join()
+        close = getattr(self._items, "close", None)
+        if close is not None:
+            close()

@@ -408,3 +408,41 @@ def test_diff_against_a_truncated_log_compares_the_common_steps(tmp_path, capsys
     status, out, _ = isaac(capsys, "diff", a, b)
     assert status == 0, out
     assert "log B: the log was not closed" in out
+
+
+def test_reading_ahead_keeps_the_order_and_raises_where_the_source_raised():
+    from replay.reader import Prefetch
+
+    assert list(Prefetch(iter(range(100)), depth=3)) == list(range(100))
+
+    def failing():
+        yield from range(5)
+        raise LogError("step 5 is out of order")
+
+    got = []
+    with pytest.raises(LogError, match="step 5 is out of order"):
+        for item in Prefetch(failing(), depth=2):
+            got.append(item)
+    assert got == [0, 1, 2, 3, 4]
+
+
+def test_closing_a_read_ahead_stops_its_thread_and_closes_the_source():
+    from replay.reader import Prefetch
+
+    closed = []
+
+    def endless():
+        try:
+            k = 0
+            while True:
+                yield k
+                k += 1
+        finally:
+            closed.append(True)
+
+    ahead = Prefetch(endless(), depth=4)
+    assert [next(ahead) for _ in range(10)] == list(range(10))
+    ahead.close()
+    assert not ahead._thread.is_alive() and closed == [True]
+    with pytest.raises(StopIteration):
+        next(ahead)
