@@ -69,12 +69,12 @@ def prepare(sim) -> None:
         step(small.model, small.settings, small.scene.world.dt, small.state, small._work,
              small._cache, solve=False)
         small._diverged()
-    finally:
-        try:
-            helper.wait(timeout=HELPER_TIMEOUT_S)
-        except subprocess.TimeoutExpired:
-            helper.kill()
-            helper.wait()
+        helper.wait(timeout=HELPER_TIMEOUT_S)
+    except BaseException as exc:  # Ctrl-C, a failure here, a stuck helper: no orphan left
+        helper.kill()
+        helper.wait()
+        if not isinstance(exc, subprocess.TimeoutExpired):
+            raise
 
 
 def _start_helper(world) -> subprocess.Popen | None:
