@@ -19,11 +19,14 @@ Positions are float32 in Rerun: exact values live in the MCAP log only.
 from __future__ import annotations
 
 import os
+import queue
+import threading
 
 import numpy as np
 import pyarrow as pa
 import rerun as rr
 
+from isaac.errors import LogError
 from isaac.records import StepRecord
 
 APP_ID = "isaac"
@@ -114,10 +117,13 @@ class RerunLogWriter:
     impulse_scale: m of arrow per N s; default: a median body size per (median mass * 1 m/s).
     normal_length: drawn length (m) of unit normals; default half a median body size.
     batch: steps buffered per ``send_columns``.
+    background: send each finished batch from a thread of its own (the Rerun writer process
+        does, so that the steps behind a batch are taken at once); otherwise in the caller.
     """
 
     def __init__(self, path: str, model, scene, *, impulse_scale: float | None = None,
-                 normal_length: float | None = None, batch: int = 100) -> None:
+                 normal_length: float | None = None, batch: int = 100,
+                 background: bool = False) -> None:
         self.path = str(path)
         self.partial_path = self.path + ".partial"
         self.model = model
@@ -138,6 +144,9 @@ class RerunLogWriter:
         self._moving_key: bytes | None = None
         self._reset()
         _load_kernels()
+        self._error: BaseException | None = None
+        self._queue: queue.Queue | None = None
+        self._thread: threading.Thread | None = None
 
         self.rec = rr.RecordingStream(APP_ID, recording_id=f"isaac-{scene.name}")
         self.rec.save(self.partial_path)
@@ -161,6 +170,12 @@ class RerunLogWriter:
             f"- push arrows (`world/push`): true length (m), for body a and body b\n"
             f"- exact float64 data: the MCAP log\n", media_type=rr.MediaType.MARKDOWN),
             static=True)
+        if background:
+            # two batches in flight at most (a few MB each); a third waits for the first
+            self._queue = queue.Queue(maxsize=2)
+            self._thread = threading.Thread(target=self._work, name="isaac-rerun-sender",
+                                            daemon=True)
+            self._thread.start()
 
     def _reset(self) -> None:
         """Start an empty batch."""
@@ -309,52 +324,95 @@ class RerunLogWriter:
             self._send()
 
     def _send(self) -> None:
+        """Close the open batch and send it (with ``background``: hand it to the thread)."""
         if not self._count:
             return
-        rec = self.rec
-        count, rows, pushes = self._count, self._row_at, self._push_at
-        times = [rr.TimeColumn("step", sequence=self._steps),
-                 rr.TimeColumn("sim_time", duration=self._times)]
+        self._check()
+        count = self._count
         lengths, strip_counts = self._strip_lengths()
+        # what _send_batch uses: the batch's own arrays (new ones are made for the next)
+        job = (self._steps, self._times, self._strips[:self._strip_at], lengths, strip_counts,
+               self._points[:self._row_at], self._normals[:self._row_at],
+               self._impulses[:self._row_at], self._counts[:count].copy(),
+               self._push_pt[:self._push_at], self._push_v[:self._push_at],
+               self._push_counts[:count].copy(), self._stats[self._stats_rows],
+               self._stats_rows)
+        self._reset()
+        if self._queue is None:
+            self._send_batch(*job)
+        else:
+            self._queue.put(job)
+
+    def _send_batch(self, steps, sim_times, strips, lengths, strip_counts, points, normals,
+                    impulses, counts, push_pt, push_v, push_counts, stats,
+                    stats_rows) -> None:
+        """Send one batch (the arrays `_send` took): outlines, contacts, arrows, stats."""
+        rec = self.rec
+        count = len(steps)
+        times = [rr.TimeColumn("step", sequence=steps),
+                 rr.TimeColumn("sim_time", duration=sim_times)]
         rec.send_columns("world/bodies/moving", indexes=times, columns=[_column(
             rr.LineStrips2D.descriptor_strips(), rr.components.LineStrip2DBatch,
-            _strips_arrow(self._strips[:self._strip_at], lengths), strip_counts)])
-        counts = self._counts[:count]
-        points = _vec2(self._points[:rows])
+            _strips_arrow(strips, lengths), strip_counts)])
+        points = _vec2(points)
         rec.send_columns("world/contacts", indexes=times, columns=[_column(
             rr.Points2D.descriptor_positions(), rr.components.Position2DBatch, points, counts)])
         # the order Arrows2D.columns gives: vectors, then origins
-        for entity, vectors in (("world/normals", self._normals),
-                                ("world/impulses", self._impulses)):
+        for entity, vectors in (("world/normals", normals), ("world/impulses", impulses)):
             rec.send_columns(entity, indexes=times, columns=[
                 _column(rr.Arrows2D.descriptor_vectors(), rr.components.Vector2DBatch,
-                        _vec2(vectors[:rows]), counts),
+                        _vec2(vectors), counts),
                 _column(rr.Arrows2D.descriptor_origins(), rr.components.Position2DBatch,
                         points, counts)])
-        push_counts = self._push_counts[:count]
         rec.send_columns("world/push", indexes=times, columns=[
             _column(rr.Arrows2D.descriptor_vectors(), rr.components.Vector2DBatch,
-                    _vec2(self._push_v[:pushes]), push_counts),
+                    _vec2(push_v), push_counts),
             _column(rr.Arrows2D.descriptor_origins(), rr.components.Position2DBatch,
-                    _vec2(self._push_pt[:pushes]), push_counts)])
-        with_stats = self._stats_rows
-        if with_stats:
+                    _vec2(push_pt), push_counts)])
+        if stats_rows:
             stat_times = times
-            if len(with_stats) < count:  # some steps came without stats
-                stat_times = [rr.TimeColumn("step", sequence=[self._steps[k] for k in with_stats]),
+            if len(stats_rows) < count:  # some steps came without stats
+                stat_times = [rr.TimeColumn("step", sequence=[steps[k] for k in stats_rows]),
                               rr.TimeColumn("sim_time",
-                                            duration=[self._times[k] for k in with_stats])]
-            values = self._stats[with_stats]
-            ones = np.ones(len(with_stats), dtype=np.int64)
+                                            duration=[sim_times[k] for k in stats_rows])]
+            ones = np.ones(len(stats_rows), dtype=np.int64)
             for j, name in enumerate(STAT_NAMES):
                 rec.send_columns(f"stats/{name}", indexes=stat_times, columns=[_column(
                     rr.Scalars.descriptor_scalars(), rr.components.ScalarBatch,
-                    pa.array(values[:, j].copy()), ones)])
-        self._reset()
+                    pa.array(stats[:, j].copy()), ones)])
+
+    def _work(self) -> None:
+        """The sender thread: batches in order; after a failure, it only drains the queue
+        (the error is raised in the caller's next call)."""
+        assert self._queue is not None
+        while True:
+            job = self._queue.get()
+            try:
+                if job is None:
+                    return
+                if self._error is None:
+                    self._send_batch(*job)
+            except BaseException as exc:  # noqa: BLE001 - reported to the caller
+                self._error = exc
+            finally:
+                self._queue.task_done()
+
+    def _check(self) -> None:
+        if self._error is not None:
+            raise LogError(f"writing {self.partial_path} failed: {self._error}")
+
+    def _stop_worker(self) -> None:
+        if self._thread is not None:
+            self._queue.put(None)
+            self._thread.join()
+            self._thread = None
 
     def settle(self) -> None:
         """Wait until the data already sent (whole batches) is written to the file; the steps
         of the open batch stay buffered."""
+        if self._queue is not None:
+            self._queue.join()
+        self._check()
         self.rec.flush()
 
     def close(self, *, complete: bool = True, stopped_at: int | None = None,
@@ -364,7 +422,13 @@ class RerunLogWriter:
             return self.path
         self._closed = True
         last = self._steps[-1] if self._steps else None
-        self._send()
+        try:
+            self._send()
+        finally:
+            self._stop_worker()
+        if self._error is not None:
+            self.rec.disconnect()  # the .partial file stays, as after a crash
+            self._check()
         if not complete:
             at = stopped_at if stopped_at is not None else last
             if at is not None:
@@ -381,7 +445,10 @@ class RerunLogWriter:
         if not self._closed:
             self._closed = True
             try:
-                self._send()
+                try:
+                    self._send()
+                finally:
+                    self._stop_worker()
                 self.rec.flush()
                 self.rec.disconnect()
             except Exception:  # noqa: BLE001 - best effort

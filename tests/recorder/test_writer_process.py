@@ -344,3 +344,23 @@ def test_writer_processes_get_cpus_of_their_own_until_the_recorder_closes(tmp_pa
         rec.write(r)
     rec.close()
     assert os.sched_getaffinity(0) == before
+
+
+def test_a_failure_in_the_rerun_sender_thread_is_raised_by_the_next_call(tmp_path):
+    from recorder.rerun_writer import RerunLogWriter
+
+    sim, records = _records(steps=30)
+    w = RerunLogWriter(str(tmp_path / "t.rrd"), sim.model, sim.scene, batch=10,
+                       background=True)
+
+    def fail(*args):
+        raise RuntimeError("disk on fire")
+
+    w._send_batch = fail
+    for r in records[:10]:  # the first batch goes to the thread, which fails
+        w.write(r, compute_stats(sim.model, (0.0, -9.81), r, with_hash=False))
+    with pytest.raises(LogError, match="t.rrd.partial failed: disk on fire"):
+        w.settle()
+    with pytest.raises(LogError, match="disk on fire"):
+        w.close()
+    assert w._thread is None  # stopped, not left waiting
