@@ -4,11 +4,11 @@ shared-memory ring, checking every float on the way.
 The simulating process's whole share of recording a step (see recorder.writer_process) is
 writing the two protobuf messages exactly as `recorder.mcap_writer`'s `encode_bodies` and
 `encode_contacts` do (tests compare the bytes), so the MCAP writer process hands them to the
-mcap library as they are. One compiled pass (`pack_layout`) writes every tag and length,
-checks every float for NaN and infinity (the recorder's never-write-NaN check) and computes the
-`/stats` sums with `isaac.diagnostics`' own kernel; it returns where each field's values go,
-and `copy_values` copies them there with memcpy (numba's byte loops ran at 2-3 GB/s, 30x
-slower than memcpy for a 160 kB step). Needs a little-endian machine (the caller checks).
+mcap library as they are. One compiled call (`pack_frame`) writes every tag and length,
+checks every float for NaN and infinity (the recorder's never-write-NaN check), computes the
+`/stats` sums with `isaac.diagnostics`' own kernel (`pack_layout`), copies each field's values
+with memcpy and writes the frame's head; in Python it was 18 memcpys and a struct, about 15
+us a step. Needs a little-endian machine (the caller checks).
 
 Wire format (recorder.schema): a scalar field is its tag and a varint (uint) or 8 little-endian
 bytes (double); a packed repeated field is its tag, the varint byte length and the raw
@@ -20,6 +20,9 @@ from __future__ import annotations
 
 import numba
 import numpy as np
+from numba import types
+from numba.core import cgutils
+from numba.extending import intrinsic
 
 from isaac.diagnostics import _sums
 
@@ -33,6 +36,7 @@ BODY_ROW_BYTES_A = np.array(BODY_ROW_BYTES, dtype=np.int64)  # the same, for the
 CONTACT_ROW_BYTES_A = np.array(CONTACT_ROW_BYTES, dtype=np.int64)
 
 
+@numba.njit(cache=True, nogil=True)
 def varint_size(value: int) -> int:
     size = 1
     while value >= 0x80:
@@ -41,18 +45,22 @@ def varint_size(value: int) -> int:
     return size
 
 
+@numba.njit(cache=True, nogil=True)
+def _message_size(head, rows, row_bytes):
+    size = head
+    if rows:
+        for b in row_bytes:
+            size += 1 + varint_size(rows * b) + rows * b
+    return size
+
+
+@numba.njit(cache=True, nogil=True)
 def message_sizes(step: int, n: int, m: int) -> tuple[int, int]:
     """Exact byte sizes of the Bodies and Contacts messages of a step with n bodies and m
-    contact rows."""
+    contact rows (compiled: the simulating process asks once per step)."""
     head = 1 + varint_size(step) + 1 + 8
-    sizes = []
-    for rows, row_bytes in ((n, BODY_ROW_BYTES), (m, CONTACT_ROW_BYTES)):
-        size = head
-        if rows:
-            for b in row_bytes:
-                size += 1 + varint_size(rows * b) + rows * b
-        sizes.append(size)
-    return sizes[0], sizes[1]
+    return (_message_size(head, n, BODY_ROW_BYTES_A),
+            _message_size(head, m, CONTACT_ROW_BYTES_A))
 
 
 @numba.njit(cache=True, nogil=True)
@@ -160,14 +168,95 @@ def pack_layout(buf, base, step, time, n, m, contacts_at, position, angle, veloc
 
 
 
-def copy_values(view: memoryview, offsets, arrays) -> None:
-    """Copy each array's little-endian bytes to ``view[offsets[k]:]`` (bools as 0/1 bytes;
-    int32 indices as their fixed32 bits)."""
-    for k, arr in enumerate(arrays):
-        at = int(offsets[k])
-        if at >= 0:
-            data = memoryview(np.ascontiguousarray(arr)).cast("B")
-            view[at:at + len(data)] = data
+@intrinsic
+def _copy_bytes(typingctx, dst, at, src):
+    """memcpy of a C-contiguous array's bytes to ``dst[at:]`` (uint8): numba's own byte loops
+    ran at 2-3 GB/s, 30x slower than memcpy for a 160 kB step, and the packed fields sit at
+    unaligned offsets, out of reach of a float64 view."""
+    if not (isinstance(dst, types.Array) and isinstance(src, types.Array)
+            and src.layout == "C" and isinstance(at, types.Integer)):
+        return None
+
+    def codegen(context, builder, sig, args):
+        d = context.make_array(sig.args[0])(context, builder, args[0])
+        s = context.make_array(sig.args[2])(context, builder, args[2])
+        offset = context.cast(builder, args[1], sig.args[1], types.intp)
+        dst_ptr = builder.gep(d.data, [offset])
+        src_ptr = builder.bitcast(s.data, dst_ptr.type)
+        item = context.get_abi_sizeof(context.get_data_type(sig.args[2].dtype))
+        nbytes = builder.mul(s.nitems, context.get_constant(types.intp, item))
+        cgutils.raw_memcpy(builder, dst_ptr, src_ptr, nbytes, 1)
+        return context.get_dummy_value()
+
+    return types.void(dst, at, src), codegen
+
+
+@numba.njit(cache=True, nogil=True)
+def _put_values(buf, at, src):
+    if at >= 0:
+        _copy_bytes(buf, at, np.ascontiguousarray(src))
+
+
+HEAD_BYTES = 120  # writer_process._HEAD: step, time, n, m, 9 stats, 2 message lengths
+
+
+@numba.njit(cache=True, nogil=True)
+def pack_frame(buf, pos, step, time, n, m, contacts_at, position, angle, velocity,
+               angular_velocity, exists, substep, a, b, feature, slot, point, normal, depth,
+               push_a, push_b, impulse, tangent_impulse, restitution, mass, inertia, concrete,
+               gx, gy):
+    """A whole MCAP frame at byte ``pos`` (a multiple of 8) of ``buf`` (uint8): the head
+    (writer_process._HEAD, native = little-endian: step, time s, n, m, the nine /stats values,
+    the two messages' lengths), the Bodies message at ``pos + HEAD_BYTES`` and the Contacts
+    message ``contacts_at`` bytes after it, in one call (`pack_layout`, then each field's values
+    by memcpy). The int arrays must be int32, ``exists`` bool.
+
+    Returns (k, bodies bytes, contacts bytes): k = -1, or the index of the first float field
+    holding a NaN or an infinity (nothing then is fit to send).
+    """
+    bad, offsets, bodies_len, contacts_len, sums = pack_layout(
+        buf, pos + HEAD_BYTES, step, time, n, m, contacts_at, position, angle, velocity,
+        angular_velocity, exists, point, normal, depth, push_a, push_b, impulse,
+        tangent_impulse, restitution, mass, inertia, concrete, gx, gy)
+    if bad >= 0:
+        return bad, bodies_len, contacts_len
+    _put_values(buf, offsets[0], position)
+    _put_values(buf, offsets[1], angle)
+    _put_values(buf, offsets[2], velocity)
+    _put_values(buf, offsets[3], angular_velocity)
+    _put_values(buf, offsets[4], exists)
+    _put_values(buf, offsets[5], substep)
+    _put_values(buf, offsets[6], a)
+    _put_values(buf, offsets[7], b)
+    _put_values(buf, offsets[8], feature)
+    _put_values(buf, offsets[9], slot)
+    _put_values(buf, offsets[10], point)
+    _put_values(buf, offsets[11], normal)
+    _put_values(buf, offsets[12], depth)
+    _put_values(buf, offsets[13], push_a)
+    _put_values(buf, offsets[14], push_b)
+    _put_values(buf, offsets[15], impulse)
+    _put_values(buf, offsets[16], tangent_impulse)
+    _put_values(buf, offsets[17], restitution)
+    ke, pe, px, py, ang, max_depth, max_impulse = sums
+    head = buf[pos:pos + HEAD_BYTES].view(np.float64)
+    ints = buf[pos:pos + HEAD_BYTES].view(np.int64)
+    ints[0] = step
+    head[1] = time
+    ints[2] = n
+    ints[3] = m
+    head[4] = ke
+    head[5] = pe
+    head[6] = ke + pe
+    head[7] = px
+    head[8] = py
+    head[9] = ang
+    head[10] = m
+    head[11] = max_depth
+    head[12] = max_impulse
+    ints[13] = bodies_len
+    ints[14] = contacts_len
+    return bad, bodies_len, contacts_len
 
 
 # -- the Rerun writer's frame ------------------------------------------------------------------

@@ -477,36 +477,28 @@ class WriterProcess:
                        bodies_size: int | None = None, contacts_size: int | None = None) -> bool:
         """Encode the frame at ``pos`` of the ring (its messages' sizes from `_sizes`, given by
         `write`, which needed them first); False (frame unusable) on NaN/infinity."""
-        from recorder.pack import copy_values, pack_layout
+        from recorder.pack import pack_frame
 
         if bodies_size is None:
             bodies_size, contacts_size, _ = _sizes(record)
-
-        step, n, m = int(record.step), int(record.angle.shape[0]), len(record.contacts)
         c = record.contacts
-        base = pos + _HEAD.size
-        bad, offsets, bodies_len, contacts_len, sums = pack_layout(
-            self._ring_u8, base, step, float(record.time), n, m, _pad8(bodies_size),
-            record.position, record.angle, record.velocity, record.angular_velocity,
-            record.exists, c.point, c.normal, c.depth, c.push_a, c.push_b, c.impulse,
-            c.tangent_impulse, c.restitution, self._stats_model.mass,
-            self._stats_model.inertia, self._stats_model.concrete, *self._gravity)
+        i32 = np.int32
+        model = self._stats_model
+        bad, bodies_len, contacts_len = pack_frame(
+            self._ring_u8, pos, int(record.step), float(record.time),
+            int(record.angle.shape[0]), len(c), _pad8(bodies_size), record.position,
+            record.angle, record.velocity, record.angular_velocity,
+            np.asarray(record.exists, dtype=bool), np.asarray(c.substep, dtype=i32),
+            np.asarray(c.a, dtype=i32), np.asarray(c.b, dtype=i32),
+            np.asarray(c.feature, dtype=i32), np.asarray(c.slot, dtype=i32), c.point, c.normal,
+            c.depth, c.push_a, c.push_b, c.impulse, c.tangent_impulse, c.restitution,
+            model.mass, model.inertia, model.concrete, *self._gravity)
         if bad >= 0:
             return False
         assert (bodies_len, contacts_len) == (bodies_size, contacts_size)
-        copy_values(self._view, offsets, (
-            record.position, record.angle, record.velocity, record.angular_velocity,
-            record.exists, *(np.asarray(x, dtype=np.int32) for x in (
-                c.substep, c.a, c.b, c.feature, c.slot)),
-            c.point, c.normal, c.depth, c.push_a, c.push_b, c.impulse, c.tangent_impulse,
-            c.restitution))
-        if stats is None:
-            ke, pe, px, py, ang, max_depth, max_impulse = sums
-            values = (ke, pe, ke + pe, px, py, ang, m, max_depth, max_impulse)
-        else:
-            values = tuple(float(stats[k]) for k in STAT_KEYS)
-        _HEAD.pack_into(self._view, pos, step, float(record.time), n, m, *values, bodies_len,
-                        contacts_len)
+        if stats is not None:
+            values = [float(stats[k]) for k in STAT_KEYS]
+            self._ring_u8[pos + 32:pos + 32 + 8 * len(STAT_KEYS)].view(np.float64)[:] = values
         return True
 
     def wait_ready(self) -> None:

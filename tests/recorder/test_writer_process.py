@@ -53,6 +53,7 @@ def _packer(ring, sim):
 
 def test_the_compiled_encoder_writes_the_reference_encoders_bytes_and_stats():
     from recorder.mcap_writer import encode_bodies, encode_contacts
+    from recorder.pack import HEAD_BYTES
 
     sim, records = _records(steps=30, leave_at=20)
     ring = np.zeros(1 << 20, dtype=np.uint8)
@@ -63,6 +64,7 @@ def test_the_compiled_encoder_writes_the_reference_encoders_bytes_and_stats():
         size = W.frame_size(r)
         assert proc._compiled_pack(8, r, None)
         frame = bytes(ring[8:8 + size])
+        assert W._HEAD.size == HEAD_BYTES
         assert frame == W.pack(r, stats)  # compiled and reference encoding agree byte for byte
         got = W.Frame(frame)
         assert bytes(got.bodies) == encode_bodies(r)
