@@ -12,7 +12,9 @@ Layout (docs/log-format.md, "Rerun"):
   ``world/impulses``: ``j * n`` at the point, ``impulse_scale`` m per N s (the scale is stored
   in the recording as AnyValues on ``world/impulses`` and in the ``info`` text document);
 - ``stats/<name>``: the `/stats` scalars as time series.
-Steps are buffered and sent column-wise (``send_columns``) every ``batch`` steps.
+Each step's outlines and arrows are computed as it arrives (`recorder.rerun_batch`, into the
+batch's float32 buffers); the batch is sent column-wise (``send_columns``) every ``batch`` steps,
+from a thread of its own in the Rerun writer process.
 Positions are float32 in Rerun: exact values live in the MCAP log only.
 """
 
@@ -196,7 +198,8 @@ class RerunLogWriter:
             self._counts = np.zeros(b, dtype=np.int64)  # contact rows per step
             self._push_counts = np.zeros(b, dtype=np.int64)  # push arrows per step
             self._strip_cap = b * self._strip_points
-            self._row_cap = 0
+            # a pile has 1-3 contact rows per body: rarely grown (untouched pages cost nothing)
+            self._row_cap = 4 * b * len(self.names)
         self._strips = np.empty((self._strip_cap, 2), dtype=np.float32)  # outline points, m
         self._points = np.empty((self._row_cap, 2), dtype=np.float32)  # m
         self._normals = np.empty((self._row_cap, 2), dtype=np.float32)  # m of arrow

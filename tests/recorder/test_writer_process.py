@@ -286,6 +286,24 @@ def test_nan_through_a_writer_process_names_step_and_body_and_keeps_earlier_step
     assert [s.step for s in LogReader(str(path)).steps()] == list(range(30))
 
 
+def test_nan_through_the_rerun_writer_process_names_step_and_contact(tmp_path):
+    sim, records = _records(steps=40)
+    bad = records[25]
+    depth = bad.contacts.depth.copy()  # a field the Rerun frame leaves out, checked all the same
+    depth[2] = np.inf
+    records[25] = dataclasses.replace(bad, contacts=dataclasses.replace(bad.contacts,
+                                                                        depth=depth))
+    rec = Recorder(sim, rrd_path=str(tmp_path / "nan.rrd"), scene_text=SCENE_TEXT)
+    c = bad.contacts
+    name_a, name_b = sim.model.names[c.a[2]], sim.model.names[c.b[2]]
+    with pytest.raises(SimulationError, match=rf"step 25: contact between '{name_a}' and "
+                                              rf"'{name_b}' has a non-finite depth"):
+        with rec:
+            for r in records:
+                rec.write(r)
+    assert (tmp_path / "nan.rrd").exists()  # closed, with the steps before
+
+
 def test_an_unwritable_output_fails_at_once_in_one_line(tmp_path):
     sim, _ = _records(steps=1)
     with pytest.raises(LogError, match="cannot write .*missing"):
