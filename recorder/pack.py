@@ -193,7 +193,10 @@ def _copy_bytes(typingctx, dst, at, src):
 
 @numba.njit(cache=True, nogil=True)
 def _put_values(buf, at, src):
+    """src's bytes at ``buf[at:]`` (nothing when ``at`` < 0: the field is left out)."""
     if at >= 0:
+        if at + src.size * src.itemsize > buf.size:  # memcpy checks nothing
+            raise IndexError("pack_frame: a field runs past the buffer")
         _copy_bytes(buf, at, np.ascontiguousarray(src))
 
 

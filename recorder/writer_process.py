@@ -17,8 +17,9 @@ Transport (both ends in this module):
   MCAP frames (`pack`, `Frame`): a head with the /stats values, then the encoded `/bodies` and
   `/contacts` messages, which the mcap library takes as they are. Rerun frames
   (`recorder.pack.pack_rerun`, `read_rerun_frame`): only what the recording draws, as raw
-  native-endian arrays that the child copies straight into `RerunLogWriter`'s batch buffers;
-  decoding protobuf back into a record had cost that child a quarter of its time.
+  native-endian arrays, from which the child computes each step's outlines and arrows in place
+  (`RerunLogWriter.append`); decoding protobuf back into a record had cost that child a
+  quarter of its time.
 - commands, parent -> child, each a 25-byte header ``<cQQQ`` (several in one ``os.write``):
   ``C`` config (pickled dict follows, first message), ``F`` frame (offset, length, end),
   ``I`` inline frame (length; the frame follows), ``S`` sync (number, settle flag; answered
@@ -76,6 +77,9 @@ _REPLY = struct.Struct("<cQ")
 # step, time, n, m, stats (STAT_KEYS), bytes of the Bodies and of the Contacts message; the
 # two messages follow, each from an 8-byte boundary
 _HEAD = struct.Struct("<qdQQ" + "d" * len(STAT_KEYS) + "QQ")
+# byte offset of the /stats values in an MCAP frame's head and in a Rerun frame (after step,
+# time, n and m in both), where `write`'s caller-given stats replace the computed ones
+_STATS_AT = 32
 
 
 def _pad8(n: int) -> int:
@@ -441,7 +445,7 @@ class WriterProcess:
                             model.inertia, model.concrete, *self._gravity) >= 0:
             return False
         if stats is not None:
-            words = buf[pos + 32:pos + 32 + 8 * len(STAT_KEYS)].view(np.float64)
+            words = buf[pos + _STATS_AT:pos + _STATS_AT + 8 * len(STAT_KEYS)].view(np.float64)
             words[:] = [float(stats[k]) for k in STAT_KEYS]
         if inline:
             self._notify()
@@ -497,8 +501,8 @@ class WriterProcess:
             return False
         assert (bodies_len, contacts_len) == (bodies_size, contacts_size)
         if stats is not None:
-            values = [float(stats[k]) for k in STAT_KEYS]
-            self._ring_u8[pos + 32:pos + 32 + 8 * len(STAT_KEYS)].view(np.float64)[:] = values
+            words = self._ring_u8[pos + _STATS_AT:pos + _STATS_AT + 8 * len(STAT_KEYS)]
+            words.view(np.float64)[:] = [float(stats[k]) for k in STAT_KEYS]
         return True
 
     def wait_ready(self) -> None:
