@@ -32,12 +32,14 @@ def step_outlines(angle, position, idx, local, counts, out, at):
         px = position[body, 0]
         py = position[body, 1]
         nv = counts[body]
-        for v in range(nv + 1):
-            lx = local[body, v % nv, 0]
-            ly = local[body, v % nv, 1]
-            out[w, 0] = np.float32(px + (lx * c - ly * sn))
-            out[w, 1] = np.float32(py + (lx * sn + ly * c))
-            w += 1
+        for v in range(nv):
+            lx = local[body, v, 0]
+            ly = local[body, v, 1]
+            out[w + v, 0] = np.float32(px + (lx * c - ly * sn))
+            out[w + v, 1] = np.float32(py + (lx * sn + ly * c))
+        out[w + nv, 0] = out[w, 0]  # closed: vertex 0 again (the same float32 values)
+        out[w + nv, 1] = out[w, 1]
+        w += nv + 1
     return w
 
 
