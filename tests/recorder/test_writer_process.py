@@ -384,3 +384,42 @@ def test_a_failure_in_the_rerun_sender_thread_is_raised_by_the_next_call(tmp_pat
     with pytest.raises(LogError, match="disk on fire"):
         w.close()
     assert w._thread is None  # stopped, not left waiting
+
+
+def test_rerun_batches_grow_for_bodies_entering_and_more_contact_rows(tmp_path):
+    """A body entering mid-batch (more outline points than the batch was sized for) and 30
+    contact rows per step on 5 bodies (the first buffers hold 2,000 rows): every step's
+    outlines and contact points are still those of its record."""
+    from rerun.chunk import RrdReader
+
+    sim, records = _records(n=5, contacts=30, steps=120)  # 3,000 rows in the first batch
+    for k in range(0, 25):  # body 3 enters at step 25
+        exists = records[k].exists.copy()
+        exists[3] = False
+        records[k] = dataclasses.replace(records[k], exists=exists)
+    path = tmp_path / "grow.rrd"
+    rec = Recorder(sim, rrd_path=str(path), scene_text=SCENE_TEXT)
+    for r in records:
+        rec.write(r)
+    rec.close()
+    strips, points = {}, {}
+    for chunk in RrdReader(str(path)).stream():
+        batch = chunk.to_record_batch()
+        for out, entity, name in ((strips, "/world/bodies/moving", "LineStrips2D:strips"),
+                                  (points, "/world/contacts", "Points2D:positions")):
+            if chunk.entity_path == entity and name in batch.schema.names:
+                out.update(zip(batch.column("step").to_pylist(),
+                               batch.column(name).to_pylist()))
+    local, counts = sim.model.vertices_local, sim.model.vertex_count
+    for r in records:
+        moving = np.flatnonzero(r.exists & ~sim.model.concrete)
+        assert len(strips[r.step]) == moving.size
+        for body, strip in zip(moving, strips[r.step]):
+            c, s = np.cos(r.angle[body]), np.sin(r.angle[body])
+            v = local[body, :counts[body]]
+            want = r.position[body] + np.stack([v[:, 0] * c - v[:, 1] * s,
+                                                v[:, 0] * s + v[:, 1] * c], axis=1)
+            np.testing.assert_allclose(np.array(strip), np.vstack([want, want[:1]]),
+                                       rtol=1e-6, atol=1e-5)
+        np.testing.assert_array_equal(np.array(points[r.step], dtype=np.float32).reshape(-1, 2),
+                                      r.contacts.point.astype(np.float32).reshape(-1, 2))
