@@ -4,8 +4,7 @@
 ms/step of ISAAC alone, with the MCAP log, with the Rerun recording and with both (interleaved
 repetitions, medians), the overhead of each (per repetition against the plain run beside it,
 then the median), the one-off seconds to open and to close the files, and, when the
-`isaac replay` command is there, the replay speed of the MCAP log (steps/s, whole process, so
-start-up is included and stated).
+`isaac replay` command is there, the replay speed against the original run (`replay_speed`).
 
 Each part is skipped with a note when what it needs (the recorder, a writer, the replay command)
 is not importable yet, so the suite lights up as those land.
@@ -155,45 +154,40 @@ def run(scene_name: str, preset: str, out_dir: str, reps: int, steps: int) -> di
             path = next(iter(modes[mode].values()))
             if os.path.exists(path):
                 result[f"{mode}_bytes_per_step"] = os.path.getsize(path) / (steps + 1)
-    mcap_path = modes.get("mcap", {}).get("mcap_path")
-    if mcap_path and os.path.exists(mcap_path) and "mcap" not in errors:
-        result["replay"] = replay_speed(mcap_path, steps)
-        loop = result["replay"].get("loop_steps_per_s")
-        if loop and "plain" in medians:
-            # replay time per step over the time per step of the run that wrote the log (the
-            # replay issue's target: <= 1.2) and of the plain run, for reference
-            if "mcap" in medians:
-                result["replay"]["time_ratio_to_recorded_run"] = (1000.0 / loop) / medians["mcap"]
-            result["replay"]["time_ratio_to_run"] = (1000.0 / loop) / medians["plain"]
+    if "mcap" in done:
+        result["replay"] = replay_speed(scene, out_dir, steps, medians.get("plain"))
     else:
         result["replay"] = {"note": "replay skipped: no MCAP log was written"}
     return result
 
 
-def replay_speed(mcap_path: str, steps: int) -> dict:
-    """Time `isaac replay LOG.mcap` (re-simulate and compare bit for bit) as a whole process, and
-    read the loop rate it reports itself (`--json`: steps/s after the first step, when the
-    command offers it)."""
+REPLAY_REPS = 3
+
+
+def replay_speed(scene, out_dir: str, steps: int, plain_ms: float | None) -> dict:
+    """The replay issue's comparison, replay against the original run: `isaac run SCENE --mcap`
+    and `isaac replay` of its log as whole processes, REPLAY_REPS interleaved repetitions, each
+    command's own loop rate (after its first step) and wall time (bench.replay_speed.compare).
+    ``loop_time_ratio`` is the replay's ms/step over the run's (target <= 1.2)."""
     why = _available("replay.cli")
     if why:
         return {"note": f"replay skipped: {why}"}
-    report = mcap_path + ".replay.json"
-    cmd = [sys.executable, "-m", "isaac", "replay", mcap_path, "--json", report]
-    t0 = time.perf_counter()
-    proc = subprocess.run(cmd, capture_output=True, text=True, check=False)
-    whole = time.perf_counter() - t0
-    out = {"command": f"isaac replay LOG.mcap --json ({steps} steps)", "seconds": whole,
-           "exit_status": proc.returncode, "identical": proc.returncode == 0,
-           "steps_per_s": steps / whole, "note": "whole process, start-up included"}
-    if os.path.exists(report):
-        with open(report) as f:
-            data = json.load(f)
-        if "steps_per_s" in data:
-            out["loop_steps_per_s"] = data["steps_per_s"]
-        if "identical" in data:
-            out["identical"] = bool(data["identical"])
-    if proc.returncode != 0:
-        out["stderr"] = (proc.stderr or proc.stdout).strip().splitlines()[-1:]
+    from pathlib import Path
+
+    from bench.replay_speed import compare
+    from isaac.scene import scene_to_yaml
+
+    scene_path = Path(out_dir) / f"replay-{scene.name}.yaml"
+    scene_path.write_text(scene_to_yaml(scene))
+    try:
+        out = compare(str(scene_path), REPLAY_REPS, Path(out_dir) / "replay", steps=steps)
+    except RuntimeError as exc:
+        return {"note": f"replay failed: {exc}", "identical": False}
+    out["command"] = (f"isaac run SCENE --mcap LOG --steps {steps} against isaac replay LOG, "
+                      f"{REPLAY_REPS} interleaved repetitions of each, whole processes")
+    out["identical"] = True  # compare raises when a replay diverges
+    if plain_ms:
+        out["time_ratio_to_plain"] = (1000.0 / out["median_replay_steps_per_s"]) / plain_ms
     return out
 
 

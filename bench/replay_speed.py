@@ -7,8 +7,9 @@ alike) as whole processes and reads two figures from each:
 - the loop rate (steps/s) each command reports, measured after its first step (which also loads
   the compiled kernels): `isaac run` prints it, `isaac replay --json` writes ``steps_per_s``;
 - the wall time of the whole process (start-up, kernel loading, closing the file included).
-Prints one line per repetition, then the medians and the ratios replay/original as JSON (from the
-medians, and from the best repetition of each side). The target
+Prints one line per repetition, then the medians and the ratios replay/original as JSON (the
+median of the per-repetition ratios, and from the best repetition of each side); `compare` is
+what `bench.recording` calls for the suite's replay row. The target
 (issue "replay") is a replay no more than 20% slower than the original run: time ratio <= 1.2.
 """
 
@@ -37,9 +38,48 @@ def _isaac(*args: str) -> tuple[float, str]:
                           text=True, cwd=REPO)
     wall = time.perf_counter() - t0
     if proc.returncode != 0:
-        raise SystemExit(f"isaac {' '.join(args)} failed ({proc.returncode}): "
-                         f"{proc.stderr.strip() or proc.stdout.strip()}")
+        raise RuntimeError(f"isaac {' '.join(args)} failed ({proc.returncode}): "
+                           f"{proc.stderr.strip() or proc.stdout.strip()}")
     return wall, proc.stdout
+
+
+def compare(scene: str, reps: int, out_dir: Path, steps: int | None = None) -> dict:
+    """`reps` interleaved repetitions of `isaac run SCENE --mcap LOG` and `isaac replay LOG`;
+    returns the repetitions (``rows``), the medians and the ratios replay/original."""
+    out_dir.mkdir(parents=True, exist_ok=True)
+    log = out_dir / (Path(scene).stem + ".mcap")
+    report = out_dir / "replay.json"
+    extra = [] if steps is None else ["--steps", str(steps)]
+    # warm-up: compile (or load) the kernels once so neither side of repetition 0 pays for it
+    _isaac("run", scene, "--steps", "2", "--mcap", str(log), "--quiet")
+    _isaac("replay", str(log))
+    rows = []
+    for rep in range(reps):
+        run_wall, run_out = _isaac("run", scene, *extra, "--mcap", str(log), "--quiet")
+        run_rate = float(RATE_RE.search(run_out).group(1))
+        replay_wall, replay_out = _isaac("replay", str(log), "--json", str(report))
+        result = json.loads(report.read_text())
+        if not result["identical"]:
+            raise RuntimeError(f"the replay diverged: {replay_out.strip()}")
+        rows.append(dict(rep=rep, steps=result["steps_compared"], run_steps_per_s=run_rate,
+                         replay_steps_per_s=result["steps_per_s"], run_wall_s=run_wall,
+                         replay_wall_s=replay_wall))
+    med = {k: statistics.median(r[k] for r in rows)
+           for k in ("run_steps_per_s", "replay_steps_per_s", "run_wall_s", "replay_wall_s")}
+    return dict(
+        scene=scene, steps=rows[0]["steps"], reps=reps, log_bytes=os.path.getsize(log),
+        rows=rows, **{f"median_{k}": v for k, v in med.items()},
+        # time per step of the replay over time per step of the original run (<= 1.2 required),
+        # per repetition (the two commands a few seconds apart), then the median
+        loop_time_ratio=statistics.median(r["run_steps_per_s"] / r["replay_steps_per_s"]
+                                          for r in rows),
+        wall_time_ratio=statistics.median(r["replay_wall_s"] / r["run_wall_s"] for r in rows),
+        # the same from the best repetition of each (least disturbed by other load)
+        best_loop_time_ratio=max(r["run_steps_per_s"] for r in rows)
+        / max(r["replay_steps_per_s"] for r in rows),
+        best_wall_time_ratio=min(r["replay_wall_s"] for r in rows)
+        / min(r["run_wall_s"] for r in rows),
+    )
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -49,39 +89,12 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--out", default=None, help="directory for the logs (default: a temp dir)")
     args = parser.parse_args(argv)
     out_dir = Path(args.out or tempfile.mkdtemp(prefix="isaac-replay-speed-"))
-    out_dir.mkdir(parents=True, exist_ok=True)
-    log = out_dir / (Path(args.scene).stem + ".mcap")
-    report = out_dir / "replay.json"
-    # warm-up: compile (or load) the kernels once so neither side of repetition 0 pays for it
-    _isaac("run", args.scene, "--steps", "2", "--mcap", str(log), "--quiet")
-    _isaac("replay", str(log))
-    rows = []
-    for rep in range(args.reps):
-        run_wall, run_out = _isaac("run", args.scene, "--mcap", str(log), "--quiet")
-        run_rate = float(RATE_RE.search(run_out).group(1))
-        replay_wall, replay_out = _isaac("replay", str(log), "--json", str(report))
-        result = json.loads(report.read_text())
-        if not result["identical"]:
-            raise SystemExit(f"the replay diverged: {replay_out.strip()}")
-        row = dict(rep=rep, steps=result["steps_compared"], run_steps_per_s=run_rate,
-                   replay_steps_per_s=result["steps_per_s"], run_wall_s=run_wall,
-                   replay_wall_s=replay_wall)
+    try:
+        summary = compare(args.scene, args.reps, out_dir)
+    except RuntimeError as exc:
+        raise SystemExit(str(exc)) from None
+    for row in summary.pop("rows"):
         print(json.dumps(row), flush=True)
-        rows.append(row)
-    med = {k: statistics.median(r[k] for r in rows)
-           for k in ("run_steps_per_s", "replay_steps_per_s", "run_wall_s", "replay_wall_s")}
-    summary = dict(
-        scene=args.scene, steps=rows[0]["steps"], reps=args.reps, log_bytes=os.path.getsize(log),
-        **{f"median_{k}": v for k, v in med.items()},
-        # time per step of the replay over time per step of the original run (<= 1.2 required)
-        loop_time_ratio=med["run_steps_per_s"] / med["replay_steps_per_s"],
-        wall_time_ratio=med["replay_wall_s"] / med["run_wall_s"],
-        # the same from the best repetition of each (least disturbed by other load)
-        best_loop_time_ratio=max(r["run_steps_per_s"] for r in rows)
-        / max(r["replay_steps_per_s"] for r in rows),
-        best_wall_time_ratio=min(r["replay_wall_s"] for r in rows)
-        / min(r["run_wall_s"] for r in rows),
-    )
     print(json.dumps(summary, indent=2))
     return 0
 
