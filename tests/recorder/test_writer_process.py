@@ -39,6 +39,18 @@ def _assert_same_record(a: StepRecord, b: StepRecord):
         np.testing.assert_array_equal(x, y)
 
 
+def _with_value(r: StepRecord, field: str, value: float) -> StepRecord:
+    """`r` with one value of `field` (a body field: its last; a contact field: its first)
+    replaced by `value`."""
+    if hasattr(r, field):
+        arr = getattr(r, field).copy()
+        arr.flat[arr.size - 1] = value
+        return dataclasses.replace(r, **{field: arr})
+    arr = getattr(r.contacts, field).copy()
+    arr.flat[0] = value
+    return dataclasses.replace(r, contacts=dataclasses.replace(r.contacts, **{field: arr}))
+
+
 def _packer(ring, sim):
     """A WriterProcess's packing half, without a child."""
     proc = W.WriterProcess.__new__(W.WriterProcess)
@@ -49,6 +61,12 @@ def _packer(ring, sim):
                                      concrete=np.asarray(sim.model.concrete, dtype=bool))
     proc._gravity = (0.0, -9.81)
     return proc
+
+
+def test_the_compiled_frame_head_has_the_size_the_reader_expects():
+    from recorder.pack import HEAD_BYTES
+
+    assert W._HEAD.size == HEAD_BYTES  # pack_frame writes the head that Frame unpacks
 
 
 def test_the_compiled_encoder_writes_the_reference_encoders_bytes_and_stats():
@@ -82,15 +100,7 @@ def test_the_compiled_encoder_refuses_a_nan_or_infinity_in_any_float_field(field
     from recorder.pack import BODY_FIELDS, CONTACT_FIELDS, pack_layout
 
     sim, records = _records(steps=3)
-    r = records[-1]
-    if hasattr(r, field):
-        arr = getattr(r, field).copy()
-        arr.flat[arr.size - 1] = bad
-        r = dataclasses.replace(r, **{field: arr})
-    else:
-        arr = getattr(r.contacts, field).copy()
-        arr.flat[0] = bad
-        r = dataclasses.replace(r, contacts=dataclasses.replace(r.contacts, **{field: arr}))
+    r = _with_value(records[-1], field, bad)
     ring = np.zeros(1 << 20, dtype=np.uint8)
     assert not _packer(ring, sim)._compiled_pack(0, r, None)
     c = r.contacts
@@ -157,15 +167,7 @@ def test_the_rerun_frame_refuses_a_nan_or_infinity_in_any_float_field(field, bad
     from recorder.pack import BODY_FIELDS, CONTACT_FIELDS
 
     sim, records = _records(steps=3)
-    r = records[-1]
-    if hasattr(r, field):
-        arr = getattr(r, field).copy()
-        arr.flat[arr.size - 1] = bad
-        r = dataclasses.replace(r, **{field: arr})
-    else:
-        arr = getattr(r.contacts, field).copy()
-        arr.flat[0] = bad
-        r = dataclasses.replace(r, contacts=dataclasses.replace(r.contacts, **{field: arr}))
+    r = _with_value(records[-1], field, bad)
     ring = np.zeros(1 << 16, dtype=np.uint8)
     proc = _rerun_packer(ring, sim)
     assert proc.write(records[1]) is True  # a good step is handed out ...
