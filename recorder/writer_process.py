@@ -152,6 +152,40 @@ def pack(record: StepRecord, stats: dict) -> bytes:
     return b"".join((head, bodies, pad, contacts, bytes(_pad8(len(contacts)) - len(contacts))))
 
 
+def pack_into(buf: np.ndarray, pos: int, record: StepRecord, model, gravity,
+              stats: dict | None = None, sizes: tuple[int, int] | None = None) -> bool:
+    """Encode `record`'s frame (`pack`'s bytes) at byte ``pos`` (a multiple of 8) of ``buf``
+    (uint8, ``frame_size(record)`` bytes from ``pos`` at least) with the compiled
+    `recorder.pack.pack_frame`; little-endian machines only.
+
+    model: ``mass``, ``inertia`` (float64) and ``concrete`` (bool) arrays, for the /stats sums;
+    gravity: (gx, gy) m/s^2. stats: the /stats values to write instead of the computed ones.
+    sizes: the messages' sizes when the caller has them (`_sizes`). Returns False, the frame
+    unusable, when a float of the record is NaN or infinite.
+    """
+    from recorder.pack import pack_frame
+
+    bodies_size, contacts_size = sizes if sizes is not None else _sizes(record)[:2]
+    c = record.contacts
+    i32 = np.int32
+    bad, bodies_len, contacts_len = pack_frame(
+        buf, pos, int(record.step), float(record.time), int(record.angle.shape[0]), len(c),
+        _pad8(bodies_size), record.position, record.angle, record.velocity,
+        record.angular_velocity, np.asarray(record.exists, dtype=bool),
+        np.asarray(c.substep, dtype=i32), np.asarray(c.a, dtype=i32),
+        np.asarray(c.b, dtype=i32), np.asarray(c.feature, dtype=i32),
+        np.asarray(c.slot, dtype=i32), c.point, c.normal, c.depth, c.push_a, c.push_b,
+        c.impulse, c.tangent_impulse, c.restitution, model.mass, model.inertia,
+        model.concrete, *gravity)
+    if bad >= 0:
+        return False
+    assert (bodies_len, contacts_len) == (bodies_size, contacts_size)
+    if stats is not None:
+        words = buf[pos + _STATS_AT:pos + _STATS_AT + 8 * len(STAT_KEYS)]
+        words.view(np.float64)[:] = [float(stats[k]) for k in STAT_KEYS]
+    return True
+
+
 class Frame:
     """One step as the writer process receives it: the encoded `/bodies` and `/contacts`
     messages (memoryviews of the frame) and the `/stats` values, without a state hash."""
@@ -481,29 +515,8 @@ class WriterProcess:
                        bodies_size: int | None = None, contacts_size: int | None = None) -> bool:
         """Encode the frame at ``pos`` of the ring (its messages' sizes from `_sizes`, given by
         `write`, which needed them first); False (frame unusable) on NaN/infinity."""
-        from recorder.pack import pack_frame
-
-        if bodies_size is None:
-            bodies_size, contacts_size, _ = _sizes(record)
-        c = record.contacts
-        i32 = np.int32
-        model = self._stats_model
-        bad, bodies_len, contacts_len = pack_frame(
-            self._ring_u8, pos, int(record.step), float(record.time),
-            int(record.angle.shape[0]), len(c), _pad8(bodies_size), record.position,
-            record.angle, record.velocity, record.angular_velocity,
-            np.asarray(record.exists, dtype=bool), np.asarray(c.substep, dtype=i32),
-            np.asarray(c.a, dtype=i32), np.asarray(c.b, dtype=i32),
-            np.asarray(c.feature, dtype=i32), np.asarray(c.slot, dtype=i32), c.point, c.normal,
-            c.depth, c.push_a, c.push_b, c.impulse, c.tangent_impulse, c.restitution,
-            model.mass, model.inertia, model.concrete, *self._gravity)
-        if bad >= 0:
-            return False
-        assert (bodies_len, contacts_len) == (bodies_size, contacts_size)
-        if stats is not None:
-            words = self._ring_u8[pos + _STATS_AT:pos + _STATS_AT + 8 * len(STAT_KEYS)]
-            words.view(np.float64)[:] = [float(stats[k]) for k in STAT_KEYS]
-        return True
+        return pack_into(self._ring_u8, pos, record, self._stats_model, self._gravity, stats,
+                         None if bodies_size is None else (bodies_size, contacts_size))
 
     def wait_ready(self) -> None:
         """Block until the child has started and opened its file (start-up is ~0.3-1 s)."""

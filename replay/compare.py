@@ -25,6 +25,7 @@ from __future__ import annotations
 import hashlib
 import json
 import struct
+import sys
 import time
 from dataclasses import asdict
 from typing import Callable, Iterator
@@ -387,6 +388,48 @@ def _compare_step(raw: RawStep, ours: dict, names: list, tolerance: float | None
     return equal, bool(found)
 
 
+class StepEncoder:
+    """A replayed step's ``/bodies``, ``/contacts`` and ``/stats`` payloads, the bytes the
+    recorder writes for it.
+
+    On little-endian machines one compiled call encodes the step into a reused buffer (the
+    writer processes' `recorder.writer_process.pack_into`, tested byte for byte against the
+    reference encoders; about 20 us on the 500-body pile against 70 us for `encode_bodies`,
+    `encode_contacts` and `compute_stats`); elsewhere, and for a record holding a NaN or an
+    infinity (which the compiled path refuses), the reference encoders.
+    """
+
+    def __init__(self, model, gravity: tuple[float, float]) -> None:
+        from types import SimpleNamespace
+
+        self.model = model
+        self.gravity = gravity
+        self._sums_model = SimpleNamespace(
+            mass=np.ascontiguousarray(model.mass, dtype=np.float64),
+            inertia=np.ascontiguousarray(model.inertia, dtype=np.float64),
+            concrete=np.ascontiguousarray(model.concrete, dtype=bool))
+        self._compiled = sys.byteorder == "little"
+        self._buf = np.zeros(0, dtype=np.uint8)
+
+    def encode(self, record: StepRecord) -> dict[str, bytes]:
+        from recorder.writer_process import Frame, frame_size, pack_into
+
+        if self._compiled:
+            size = frame_size(record)
+            if self._buf.size < size:
+                self._buf = np.zeros(max(size, 2 * self._buf.size), dtype=np.uint8)
+            if pack_into(self._buf, 0, record, self._sums_model, self.gravity):
+                frame = Frame(self._buf[:size])
+                stats = {**frame.stats, "state_hash": frame.state_hash()}
+                # bytes, not views of the buffer: the next step overwrites it, and
+                # memoryview == bytes compares item by item (30x slower)
+                return {"/bodies": bytes(frame.bodies), "/contacts": bytes(frame.contacts),
+                        "/stats": encode_stats(record.step, record.time, stats)}
+        return {"/bodies": encode_bodies(record), "/contacts": encode_contacts(record),
+                "/stats": encode_stats(record.step, record.time,
+                                       compute_stats(self.model, self.gravity, record))}
+
+
 def replay_log(path: str, *, from_step: int | None = None, to_step: int | None = None,
                tolerance: float | None = None, all_steps: bool = False,
                max_reported: int = DEFAULT_MAX_REPORTED,
@@ -414,6 +457,7 @@ def replay_log(path: str, *, from_step: int | None = None, to_step: int | None =
     model = sim.model
     names = list(model.names)
     gravity = tuple(float(g) for g in scene.world.gravity)
+    encoder = StepEncoder(model, gravity)
     report = Report(mode="replay", logs=[str(path)], tolerance=tolerance,
                     max_reported=max_reported)
     report.notes.extend(notes)
@@ -474,9 +518,7 @@ def replay_log(path: str, *, from_step: int | None = None, to_step: int | None =
                 sim.resume(_logged_record(raw))
                 last_exists = sim.state.exists.copy()
                 continue
-            ours = {"/bodies": encode_bodies(record), "/contacts": encode_contacts(record),
-                    "/stats": encode_stats(record.step, record.time,
-                                           compute_stats(model, gravity, record))}
+            ours = encoder.encode(record)
             if last_exists is None or not np.array_equal(record.exists, last_exists):
                 ours["/world"] = encode_world(model, record.step, record.time, record.exists)
                 last_exists = record.exists.copy()
