@@ -168,7 +168,8 @@ def replay_speed(scene, out_dir: str, steps: int, plain_ms: float | None) -> dic
     """The replay issue's comparison, replay against the original run: `isaac run SCENE --mcap`
     and `isaac replay` of its log as whole processes, REPLAY_REPS interleaved repetitions, each
     command's own loop rate (after its first step) and wall time (bench.replay_speed.compare).
-    ``loop_time_ratio`` is the replay's ms/step over the run's (target <= 1.2)."""
+    ``time_ratio`` is the replay's ms/step over the run's, the run's file finishing included
+    (target <= 1.2); ``loop_time_ratio`` leaves that out."""
     why = _available("replay.cli")
     if why:
         return {"note": f"replay skipped: {why}"}
