@@ -110,6 +110,42 @@ def _finite(src):
 
 
 @numba.njit(cache=True, nogil=True)
+def _stat_sums(mass, inertia, concrete, exists, position, velocity, angular_velocity, depth,
+               impulse, gx, gy):
+    """(kinetic, potential energy, linear momentum x, y, angular momentum, max depth, max
+    impulse) of a step, as `recorder.recording.compute_stats` has them."""
+    ke, pe, px, py, ang = _sums(mass, inertia, concrete, exists, position, velocity,
+                                angular_velocity, gx, gy)
+    max_depth = depth[0] if depth.size else 0.0
+    max_impulse = impulse[0] if impulse.size else 0.0
+    for i in range(1, depth.size):
+        max_depth = max(max_depth, depth[i])
+        max_impulse = max(max_impulse, impulse[i])
+    return ke, pe, px, py, ang, max_depth, max_impulse
+
+
+@numba.njit(cache=True, nogil=True)
+def _write_head(words, ints, base, step, time, n, m, sums):
+    """The head both frames start with, from word ``base`` of ``words`` / ``ints`` (float64 and
+    int64 views of one buffer): step, time (s), n, m, then the nine /stats values in
+    writer_process.STAT_KEYS order (`_stat_sums`' and their derived ones)."""
+    ke, pe, px, py, ang, max_depth, max_impulse = sums
+    ints[base] = step
+    words[base + 1] = time
+    ints[base + 2] = n
+    ints[base + 3] = m
+    words[base + 4] = ke
+    words[base + 5] = pe
+    words[base + 6] = ke + pe
+    words[base + 7] = px
+    words[base + 8] = py
+    words[base + 9] = ang
+    words[base + 10] = m
+    words[base + 11] = max_depth
+    words[base + 12] = max_impulse
+
+
+@numba.njit(cache=True, nogil=True)
 def pack_layout(buf, base, step, time, n, m, contacts_at, position, angle, velocity,
                 angular_velocity, exists, point, normal, depth, push_a, push_b, impulse,
                 tangent_impulse, restitution, mass, inertia, concrete, gx, gy):
@@ -157,14 +193,9 @@ def pack_layout(buf, base, step, time, n, m, contacts_at, position, angle, veloc
         bad = 16
     if bad < 0 and not _finite(restitution):
         bad = 17
-    ke, pe, px, py, ang = _sums(mass, inertia, concrete, exists, position, velocity,
-                                angular_velocity, gx, gy)
-    max_depth = depth[0] if depth.size else 0.0
-    max_impulse = impulse[0] if impulse.size else 0.0
-    for i in range(1, depth.size):
-        max_depth = max(max_depth, depth[i])
-        max_impulse = max(max_impulse, impulse[i])
-    return bad, offsets, bodies_len, contacts_len, (ke, pe, px, py, ang, max_depth, max_impulse)
+    return bad, offsets, bodies_len, contacts_len, _stat_sums(
+        mass, inertia, concrete, exists, position, velocity, angular_velocity, depth, impulse,
+        gx, gy)
 
 
 
@@ -241,22 +272,8 @@ def pack_frame(buf, pos, step, time, n, m, contacts_at, position, angle, velocit
     _put_values(buf, offsets[15], impulse)
     _put_values(buf, offsets[16], tangent_impulse)
     _put_values(buf, offsets[17], restitution)
-    ke, pe, px, py, ang, max_depth, max_impulse = sums
-    head = buf[pos:pos + HEAD_BYTES].view(np.float64)
     ints = buf[pos:pos + HEAD_BYTES].view(np.int64)
-    ints[0] = step
-    head[1] = time
-    ints[2] = n
-    ints[3] = m
-    head[4] = ke
-    head[5] = pe
-    head[6] = ke + pe
-    head[7] = px
-    head[8] = py
-    head[9] = ang
-    head[10] = m
-    head[11] = max_depth
-    head[12] = max_impulse
+    _write_head(buf[pos:pos + HEAD_BYTES].view(np.float64), ints, 0, step, time, n, m, sums)
     ints[13] = bodies_len
     ints[14] = contacts_len
     return bad, bodies_len, contacts_len
@@ -368,24 +385,7 @@ def pack_rerun(buf, at, step, time, position, angle, exists, velocity, angular_v
         bad = _first(bad, 16)
     if not _finite(restitution):
         bad = _first(bad, 17)
-    ke, pe, px, py, ang = _sums(mass, inertia, concrete, exists, position, velocity,
-                                angular_velocity, gx, gy)
-    max_depth = depth[0] if m else 0.0
-    max_impulse = impulse[0] if m else 0.0
-    for i in range(1, m):
-        max_depth = max(max_depth, depth[i])
-        max_impulse = max(max_impulse, impulse[i])
-    ints[base] = step
-    words[base + 1] = time
-    ints[base + 2] = n
-    ints[base + 3] = m
-    words[base + 4] = ke
-    words[base + 5] = pe
-    words[base + 6] = ke + pe
-    words[base + 7] = px
-    words[base + 8] = py
-    words[base + 9] = ang
-    words[base + 10] = m
-    words[base + 11] = max_depth
-    words[base + 12] = max_impulse
+    _write_head(words, ints, base, step, time, n, m, _stat_sums(
+        mass, inertia, concrete, exists, position, velocity, angular_velocity, depth, impulse,
+        gx, gy))
     return bad

@@ -181,9 +181,15 @@ def pack_into(buf: np.ndarray, pos: int, record: StepRecord, model, gravity,
         return False
     assert (bodies_len, contacts_len) == (bodies_size, contacts_size)
     if stats is not None:
-        words = buf[pos + _STATS_AT:pos + _STATS_AT + 8 * len(STAT_KEYS)]
-        words.view(np.float64)[:] = [float(stats[k]) for k in STAT_KEYS]
+        _put_stats(buf, pos, stats)
     return True
+
+
+def _put_stats(buf: np.ndarray, pos: int, stats: dict) -> None:
+    """The caller's /stats values over the computed ones, in the head of the frame at ``pos``
+    (MCAP or Rerun frame: both keep them at _STATS_AT)."""
+    words = buf[pos + _STATS_AT:pos + _STATS_AT + 8 * len(STAT_KEYS)].view(np.float64)
+    words[:] = [float(stats[k]) for k in STAT_KEYS]
 
 
 class Frame:
@@ -479,8 +485,7 @@ class WriterProcess:
                             model.inertia, model.concrete, *self._gravity) >= 0:
             return False
         if stats is not None:
-            words = buf[pos + _STATS_AT:pos + _STATS_AT + 8 * len(STAT_KEYS)].view(np.float64)
-            words[:] = [float(stats[k]) for k in STAT_KEYS]
+            _put_stats(buf, pos, stats)
         if inline:
             self._notify()
             self._send(b"I", size, payload=buf.tobytes())
