@@ -39,7 +39,7 @@ def _time_paired(scene, steps: int, mcap_path=None, rrd_path=None) -> dict:
     the Rerun writer's batch every 100 steps counts. Opening (writer processes started, step 0
     written) and closing the files are one-off costs, timed apart in seconds.
     """
-    from isaac.simulation import Simulation
+    from isaac.engine.simulation import Simulation
 
     plain, recorded = Simulation(scene), Simulation(scene)
     for _ in range(20):  # load the compiled kernels outside the clock
@@ -170,7 +170,7 @@ def replay_speed(scene, out_dir: str, steps: int, plain_ms: float | None) -> dic
     command's own loop rate (after its first step) and wall time (bench.replay_speed.compare).
     ``time_ratio`` is the replay's ms/step over the run's, the run's file finishing included
     (target <= 1.2); ``loop_time_ratio`` leaves that out."""
-    why = _available("replay.cli")
+    why = _available("isaac.app.verify")
     if why:
         return {"note": f"replay skipped: {why}"}
     from pathlib import Path

@@ -5,7 +5,7 @@ restitution, friction and `concrete` for static) plus what the benchmark needs t
 (how many steps to warm up and to time, which quality figure applies). Pyramids and piles are
 generator parameters, written as YAML text in the scene format and read with
 `isaac.scene.load_scene_text`; when the loader is missing (or refuses the text) the same
-parameters go straight to `isaac.generators` and `Scene.source` says so. The three small scenes
+parameters go straight to `isaac.scene.generators` and `Scene.source` says so. The three small scenes
 are written out body by body.
 
 All scenes: dt = 1/60 s, no sleeping in any engine, friction on except in the head-on case.
@@ -90,7 +90,7 @@ def _pyramid_params(rows: int) -> dict:
 
 
 def _expand_pyramid(rows: int, steps: int) -> Scene:
-    from isaac.generators import pyramid
+    from isaac.scene.generators import pyramid
 
     p = _pyramid_params(rows)
     p = dict(p, box=tuple(p["box"]), base=tuple(p["base"]))
@@ -113,7 +113,7 @@ def _pile_params(count: int, seed: int) -> dict:
 
 
 def _expand_pile(count: int, seed: int, steps: int) -> Scene:
-    from isaac.generators import pile
+    from isaac.scene.generators import pile
 
     p = _pile_params(count, seed)
     container = p.pop("container")

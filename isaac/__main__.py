@@ -1,5 +1,5 @@
 import sys
 
-from isaac.cli import main
+from isaac.app.cli import main
 
 sys.exit(main())

@@ -4,7 +4,8 @@
 docs/log-format.md describes the MCAP layout. The engine (`isaac`) never imports this package.
 """
 
-from recorder.recording import Recorder, check_finite, compute_stats
+from recorder.recording import Recorder
+from recorder.stats import check_finite, compute_stats
 
 __all__ = ["Recorder", "LogReader", "check_finite", "compute_stats"]
 

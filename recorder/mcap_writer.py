@@ -30,7 +30,7 @@ import numpy as np
 from mcap.writer import CompressionType, Writer
 
 from isaac.errors import LogError
-from isaac.records import StepRecord, state_hash
+from isaac.engine.records import StepRecord, state_hash
 from recorder import schema as S
 
 PROFILE = "isaac"
@@ -177,7 +177,7 @@ def encode_contacts(record: StepRecord) -> bytes:
 
 
 def encode_stats(step: int, time: float, stats: dict) -> bytes:
-    """``isaac.log.Stats`` from the dict made by ``recorder.recording.compute_stats``."""
+    """``isaac.log.Stats`` from the dict made by ``recorder.stats.compute_stats``."""
     return b"".join((
         S.enc_uint(1, step),
         S.enc_double(2, time),

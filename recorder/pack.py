@@ -6,7 +6,7 @@ writing the two protobuf messages exactly as `recorder.mcap_writer`'s `encode_bo
 `encode_contacts` do (tests compare the bytes), so the MCAP writer process hands them to the
 mcap library as they are. One compiled call (`pack_frame`) writes every tag and length,
 checks every float for NaN and infinity (the recorder's never-write-NaN check), computes the
-`/stats` sums with `isaac.diagnostics`' own kernel (`pack_layout`), copies each field's values
+`/stats` sums with `isaac.engine.diagnostics`' own kernel (`pack_layout`), copies each field's values
 with memcpy and writes the frame's head; in Python it was 18 memcpys and a struct, about 15
 us a step. Needs a little-endian machine (the caller checks).
 
@@ -24,7 +24,7 @@ from numba import types
 from numba.core import cgutils
 from numba.extending import intrinsic
 
-from isaac.diagnostics import _sums
+from isaac.engine.diagnostics import _sums
 
 # the fields of Bodies (numbers 3-7) and Contacts (3-15), in the order of recorder.schema
 BODY_FIELDS = ("position", "angle", "velocity", "angular_velocity", "exists")
@@ -113,7 +113,7 @@ def _finite(src):
 def _stat_sums(mass, inertia, concrete, exists, position, velocity, angular_velocity, depth,
                impulse, gx, gy):
     """(kinetic, potential energy, linear momentum x, y, angular momentum, max depth, max
-    impulse) of a step, as `recorder.recording.compute_stats` has them."""
+    impulse) of a step, as `recorder.stats.compute_stats` has them."""
     ke, pe, px, py, ang = _sums(mass, inertia, concrete, exists, position, velocity,
                                 angular_velocity, gx, gy)
     max_depth = depth[0] if depth.size else 0.0
@@ -156,7 +156,7 @@ def pack_layout(buf, base, step, time, n, m, contacts_at, position, angle, veloc
     of BODY_FIELDS + CONTACT_FIELDS puts its values (-1: left out, empty); k = -1, or the index
     of the first float field holding a NaN or an infinity, in which case the frame must not be
     sent; stats = (kinetic, potential energy, linear momentum x, y, angular momentum, max
-    depth, max impulse), as `recorder.recording.compute_stats` has them.
+    depth, max impulse), as `recorder.stats.compute_stats` has them.
     """
     offsets = np.empty(18, dtype=np.int64)
     at = _head(buf, base, step, time)

@@ -36,7 +36,7 @@ from mcap.stream_reader import StreamReader
 from mcap.writer import Writer
 
 from isaac.errors import LogError
-from isaac.records import Contacts, StepRecord
+from isaac.engine.records import Contacts, StepRecord
 from recorder import schema as S
 from recorder.mcap_writer import (COMPRESSION, FORMAT_NAME, META_END, META_START,
                                   SCENE_ATTACHMENT, end_metadata)

@@ -29,7 +29,7 @@ import pyarrow as pa
 import rerun as rr
 
 from isaac.errors import LogError
-from isaac.records import StepRecord
+from isaac.engine.records import StepRecord
 
 APP_ID = "isaac"
 STAT_NAMES = ("kinetic_energy", "potential_energy", "total_energy", "linear_momentum_x",

@@ -92,7 +92,7 @@ MESSAGES: dict[str, list[tuple[str, int, str, bool]]] = {
         ("contact_count", 9, "uint32", False),
         ("max_depth", 10, "double", False),          # m (0 with no contact)
         ("max_impulse", 11, "double", False),        # N s (0 with no contact)
-        ("state_hash", 12, "string", False),         # isaac.diagnostics.state_hash, sha256 hex
+        ("state_hash", 12, "string", False),         # isaac.engine.diagnostics.state_hash, sha256 hex
     ],
 }
 

@@ -53,7 +53,7 @@ from typing import NamedTuple
 import numpy as np
 
 from isaac.errors import LogError
-from isaac.records import Contacts, StepRecord
+from isaac.engine.records import Contacts, StepRecord
 
 # shared memory per writer, in frames of the scene's size, within RING_MIN..RING_MAX bytes,
 # mapped pre-faulted (a fresh page costs a fault in each process: writes over a cold 32 MiB
@@ -217,7 +217,7 @@ class Frame:
         return self._fields
 
     def state_hash(self) -> str:
-        """`isaac.records.state_hash` of the step, from the message's bytes (the same bytes)."""
+        """`isaac.engine.records.state_hash` of the step, from the message's bytes (the same bytes)."""
         h = hashlib.sha256()
         for part in self.body_fields():
             h.update(part)
@@ -430,10 +430,10 @@ class WriterProcess:
     def write(self, record: StepRecord, stats: dict | None = None) -> bool:
         """Hand one step to the child (waits only while the ring is full).
 
-        stats: the step's `/stats` values without the hash (`recorder.recording.compute_stats`);
+        stats: the step's `/stats` values without the hash (`recorder.stats.compute_stats`);
             None: computed here, with the same kernel, in the pass that copies the record.
         Returns False, sending nothing, when a float of the record is NaN or infinite (the
-        caller says which: `recorder.recording.check_finite`).
+        caller says which: `recorder.stats.check_finite`).
         """
         if self.kind == "rerun":
             return self._write_rerun(record, stats)
@@ -496,8 +496,8 @@ class WriterProcess:
     def _write_inline(self, record: StepRecord, stats: dict | None) -> bool:
         """A frame too large for the ring (or a big-endian machine): encoded by the reference
         encoders and sent through the command pipe."""
-        from isaac.diagnostics import all_finite
-        from recorder.recording import compute_stats
+        from isaac.engine.diagnostics import all_finite
+        from recorder.stats import compute_stats
 
         if not all_finite(record):
             return False

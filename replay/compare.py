@@ -33,13 +33,13 @@ from typing import Callable, Iterator
 import numpy as np
 
 from isaac.errors import LogError, SimulationError
-from isaac.records import StepRecord
+from isaac.engine.records import StepRecord
 from isaac.scene import Scene, load_scene_text
 from recorder import schema as S
 from recorder.mcap_writer import (build_metadata, encode_bodies, encode_contacts, encode_stats,
                                   encode_world)
 from recorder.reader import record_from_messages
-from recorder.recording import compute_stats
+from recorder.stats import compute_stats
 from replay.reader import Prefetch, RawLog, RawStep
 from replay.report import DEFAULT_MAX_REPORTED, Divergence, Report
 
@@ -445,7 +445,7 @@ def replay_log(path: str, *, from_step: int | None = None, to_step: int | None =
     Raises LogError / SceneError for a file that is not a readable ISAAC log or whose scene is
     invalid; a divergence is reported, not raised.
     """
-    from isaac.simulation import Simulation  # loads the compiled kernels
+    from isaac.engine.simulation import Simulation  # loads the compiled kernels
 
     if from_step is not None and from_step < 0:
         raise LogError(f"--from-step must be >= 0, got {from_step}")

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from isaac.polygon import box_vertices
+from isaac.scene.polygon import box_vertices
 from isaac.scene import PRESETS, BodySpec, Scene, WorldSettings
 
 

@@ -28,7 +28,7 @@ def _engines() -> list[str]:
     names = [name for name, module in (("pymunk", "pymunk"), ("box2d", "Box2D"))
              if importlib.util.find_spec(module) is not None]
     try:
-        importlib.import_module("isaac.simulation").Simulation  # noqa: B018
+        importlib.import_module("isaac.engine.simulation").Simulation  # noqa: B018
         names.append("isaac-balanced")
     except (ImportError, AttributeError):
         pass

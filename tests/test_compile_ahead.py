@@ -1,4 +1,4 @@
-"""First run with an empty numba cache (isaac.compile_ahead): the solver is compiled by a helper
+"""First run with an empty numba cache (isaac.engine.compile_ahead): the solver is compiled by a helper
 process into the cache, this process loads it from there, and the run's bits do not change."""
 
 from __future__ import annotations
@@ -8,19 +8,19 @@ import os
 import subprocess
 import sys
 
-from isaac.compile_ahead import is_cold, solver_kernel
-from isaac.diagnostics import state_hash
-from isaac.simulation import Simulation
-from isaac.step import StepSettings
+from isaac.engine.compile_ahead import is_cold, solver_kernel
+from isaac.engine.diagnostics import state_hash
+from isaac.engine.simulation import Simulation
+from isaac.engine.step import StepSettings
 
 from test_determinism import pile_scene
 
 _FIRST_RUN = r"""
 import json, sys
 sys.path.insert(0, {tests!r})
-from isaac.compile_ahead import is_cold, solver_kernel
-from isaac.diagnostics import state_hash
-from isaac.simulation import Simulation
+from isaac.engine.compile_ahead import is_cold, solver_kernel
+from isaac.engine.diagnostics import state_hash
+from isaac.engine.simulation import Simulation
 from test_determinism import pile_scene
 
 scene = pile_scene("balanced")
@@ -62,8 +62,8 @@ def test_a_warm_cache_is_not_cold_and_a_kernel_without_cache_never_is():
 
 
 def test_the_seed_solver_is_the_kernel_prepared_for_the_seed_preset():
-    from isaac import impulse
+    from isaac.engine.solver import seed, sequential
 
-    assert solver_kernel(StepSettings.of(pile_scene("seed").world)) is impulse._solve_seed
+    assert solver_kernel(StepSettings.of(pile_scene("seed").world)) is seed.solve_seed
     assert (solver_kernel(StepSettings.of(pile_scene("balanced").world))
-            is impulse._solve_sequential)
+            is sequential.solve_sequential)

@@ -2,10 +2,10 @@
 
 import numpy as np
 
-from isaac import generators
-from isaac.diagnostics import state_hash
+from isaac.scene import generators
+from isaac.engine.diagnostics import state_hash
 from isaac.scene import PRESETS, Scene, WorldSettings
-from isaac.simulation import Simulation
+from isaac.engine.simulation import Simulation
 
 
 def pile_scene(preset):

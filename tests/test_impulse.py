@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from isaac.simulation import Simulation
+from isaac.engine.simulation import Simulation
 from physics_helpers import box, scene
 
 

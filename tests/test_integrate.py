@@ -2,10 +2,9 @@
 
 import math
 
-import numpy as np
 import pytest
 
-from isaac.simulation import Simulation
+from isaac.engine.simulation import Simulation
 from physics_helpers import box, scene
 
 G = 9.81

@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pytest
 
-from isaac.polygon import box_vertices, mass_properties, regular_vertices, validate_polygon
+from isaac.scene.polygon import box_vertices, mass_properties, regular_vertices, validate_polygon
 
 REL = 1e-12
 

@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from isaac.polygon import mass_properties
+from isaac.scene.polygon import mass_properties
 from isaac.scene import (
     PRESETS,
     BodySpec,
@@ -262,7 +262,7 @@ def test_a_number_written_as_a_name_is_that_text():
 
 def test_pure_python_yaml_parser_gives_the_same_scene(monkeypatch):
     # libyaml is optional in PyYAML: the fallback parser must read scenes identically
-    from isaac import scene as scene_module
+    from isaac.scene import reader as scene_module
 
     path = SCENES[0].parent / "default.yaml"
     fast = load_scene(path)

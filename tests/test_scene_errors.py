@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-from isaac import scene as scene_module
+from isaac.scene import loader as scene_module
 from isaac.errors import SceneError
 from isaac.scene import load_scene, load_scene_text
 

@@ -10,11 +10,11 @@ import numpy as np
 import pytest
 from physics_helpers import box, scene
 
-from isaac import tradeoff
-from isaac.cli import main
+from isaac.app import tradeoff
+from isaac.app.cli import main
 from isaac.scene import PRESETS, load_scene
-from isaac.simulation import Simulation
-from isaac.tradeoff import (
+from isaac.engine.simulation import Simulation
+from isaac.app.tradeoff import (
     GridPoint,
     TradeoffError,
     analytic_model,

@@ -37,7 +37,7 @@ def engine_available(name: str) -> tuple[bool, str]:
         if module is not None:
             importlib.import_module(module)
         elif name.startswith("isaac"):
-            importlib.import_module("isaac.simulation").Simulation  # noqa: B018
+            importlib.import_module("isaac.engine.simulation").Simulation  # noqa: B018
         else:
             return False, f"unknown engine {name!r}"
     except (ImportError, AttributeError) as exc:

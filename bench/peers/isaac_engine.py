@@ -11,7 +11,7 @@ import numpy as np
 
 from bench.scenes import with_preset
 from isaac.scene import Scene
-from isaac.simulation import Simulation
+from isaac.engine.simulation import Simulation
 
 
 def describe(scene: Scene) -> str:

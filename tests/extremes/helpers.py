@@ -8,10 +8,10 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from physics_helpers import box
 
-from isaac.diagnostics import kinetic_energy, potential_energy
-from isaac.polygon import validate_polygon
+from isaac.engine.diagnostics import kinetic_energy, potential_energy
+from isaac.scene.polygon import validate_polygon
 from isaac.scene import PRESETS, BodySpec, Scene
-from isaac.simulation import Simulation
+from isaac.engine.simulation import Simulation
 
 PRESET_NAMES = ("seed", "fast", "balanced", "accurate")
 G = 9.81  # m/s^2

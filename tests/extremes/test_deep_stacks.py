@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from isaac.scene import load_scene
-from isaac.simulation import Simulation
+from isaac.engine.simulation import Simulation
 
 from .helpers import run, with_preset
 

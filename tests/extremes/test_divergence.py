@@ -8,7 +8,7 @@ import pytest
 from physics_helpers import box, scene
 
 from isaac.errors import SimulationError
-from isaac.simulation import DIVERGED_POSITION, Simulation
+from isaac.engine.simulation import DIVERGED_POSITION, Simulation
 
 from .helpers import G
 

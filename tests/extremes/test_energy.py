@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from physics_helpers import box, scene
 
-from isaac.simulation import Simulation
+from isaac.engine.simulation import Simulation
 
 from .helpers import PRESET_NAMES, G, energy, ground, run
 

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from isaac.scene import load_scene, load_scene_text
-from isaac.simulation import Simulation
+from isaac.engine.simulation import Simulation
 
 from .helpers import run, shifted
 

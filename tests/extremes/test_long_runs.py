@@ -9,7 +9,7 @@ import math
 import pytest
 from physics_helpers import box, scene
 
-from isaac.simulation import Simulation
+from isaac.engine.simulation import Simulation
 
 OMEGA = 2.0  # rad/s
 DT = 0.01  # s

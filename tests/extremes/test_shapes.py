@@ -7,7 +7,7 @@ from __future__ import annotations
 import pytest
 from physics_helpers import box, scene
 
-from isaac.simulation import Simulation
+from isaac.engine.simulation import Simulation
 
 from .helpers import PRESET_NAMES, assert_finite, container, energy, polygon, regular_vertices, run
 

@@ -11,7 +11,7 @@ import pytest
 from physics_helpers import box, scene
 
 from isaac.scene import load_scene
-from isaac.simulation import Simulation
+from isaac.engine.simulation import Simulation
 
 from .helpers import with_preset
 

@@ -12,8 +12,8 @@ import pytest
 from physics_helpers import box, scene
 
 from isaac.scene import load_scene
-from isaac.simulation import Simulation
-from isaac.tradeoff import analytic_trajectory, sample_times, simulate
+from isaac.engine.simulation import Simulation
+from isaac.app.tradeoff import analytic_trajectory, sample_times, simulate
 
 from .helpers import PRESET_NAMES, G, assert_finite, energy, ground, run, with_preset
 
@@ -84,7 +84,7 @@ def test_free_flight_error_shrinks_at_first_order(integrator):
 
 def test_bounce_error_against_closed_form_shrinks_at_first_order():
     """bounce.yaml (e = 0.8) under balanced for 3 s: position RMS against the analytic bounce
-    (isaac.tradeoff) at dt = 1/120 ... 1/960. Where inside a step the impact falls (its phase)
+    (isaac.app.tradeoff) at dt = 1/120 ... 1/960. Where inside a step the impact falls (its phase)
     sets the bounce's error, between -e(1+e) u dt / 2 and +e(1+e) u dt / 2; for one drop height
     the phase at a few dt can line up, so the error is averaged over drop heights spread across
     one step of fall. Contacts add timing errors of order dt, so the observed order is about 1;

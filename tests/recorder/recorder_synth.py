@@ -11,7 +11,7 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from isaac.records import Contacts, StepRecord
+from isaac.engine.records import Contacts, StepRecord
 from isaac.scene import BodySpec, Scene, WorldSettings
 
 

@@ -19,7 +19,7 @@ from google.protobuf import descriptor_pb2, descriptor_pool, message_factory
 from mcap.reader import make_reader
 
 from isaac.errors import LogError, SimulationError
-from isaac.records import StepRecord
+from isaac.engine.records import StepRecord
 from recorder import Recorder
 from recorder.reader import LogReader
 
@@ -371,7 +371,7 @@ def test_inspect_prints_summary_and_step_table(tmp_path):
 
 def test_foreground_and_background_writers_write_the_same_bytes(tmp_path):
     from recorder.mcap_writer import McapLogWriter
-    from recorder.recording import compute_stats
+    from recorder.stats import compute_stats
     sim = SynthSim(10, 4)
     records = [sim.record()] + [sim.step() for _ in range(150)]
     for bg, name in ((False, "fg.mcap"), (True, "bg.mcap")):

@@ -19,9 +19,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-pytest.importorskip("isaac.simulation")
+pytest.importorskip("isaac.engine.simulation")
 from isaac.scene import load_scene_text  # noqa: E402
-from isaac.simulation import Simulation  # noqa: E402
+from isaac.engine.simulation import Simulation  # noqa: E402
 from recorder import Recorder  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).parent))
@@ -163,7 +163,7 @@ def test_head_on_equal_masses_exchange_velocities_in_the_log(tmp_path):
 
 
 def test_log_alone_is_enough_to_resimulate_bit_for_bit(tmp_path):
-    from isaac import diagnostics
+    from isaac.engine import diagnostics
     from recorder.reader import LogReader
     _world, _bodies, _contacts = logged_run(tmp_path, OFF_CENTRE)
     log = LogReader(str(tmp_path / "off_centre_log.mcap"))

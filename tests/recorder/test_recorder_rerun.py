@@ -86,7 +86,7 @@ def test_mcap_to_rrd_conversion_keeps_every_step(tmp_path):
 
 
 def test_isaac_run_killed_with_sigkill_leaves_a_recoverable_log(tmp_path):
-    pytest.importorskip("isaac.simulation")
+    pytest.importorskip("isaac.engine.simulation")
     out = tmp_path / "pile.mcap"
     proc = subprocess.Popen([PYTHON, "-m", "isaac", "run", "scenes/pile.yaml", "--steps",
                              "100000", "--mcap", str(out), "--quiet"], cwd=REPO,
@@ -117,7 +117,7 @@ def test_isaac_run_killed_with_sigkill_leaves_a_recoverable_log(tmp_path):
 
 
 def test_isaac_run_stopped_with_sigterm_finishes_both_files_and_says_where(tmp_path):
-    pytest.importorskip("isaac.simulation")
+    pytest.importorskip("isaac.engine.simulation")
     mcap, rrd = tmp_path / "pile.mcap", tmp_path / "pile.rrd"
     proc = subprocess.Popen([PYTHON, "-m", "isaac", "run", "scenes/pile.yaml", "--steps",
                              "100000", "--mcap", str(mcap), "--rrd", str(rrd), "--quiet"],

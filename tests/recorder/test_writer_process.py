@@ -14,11 +14,11 @@ import numpy as np
 import pytest
 
 from isaac.errors import LogError, SimulationError
-from isaac.records import Contacts, StepRecord, state_hash
+from isaac.engine.records import Contacts, StepRecord, state_hash
 from recorder import Recorder
 from recorder import writer_process as W
 from recorder.reader import LogReader
-from recorder.recording import compute_stats
+from recorder.stats import compute_stats
 
 sys.path.insert(0, str(Path(__file__).parent))
 from recorder_synth import SCENE_TEXT, SynthSim  # noqa: E402

@@ -9,10 +9,10 @@ import numpy as np
 from mcap.reader import make_reader
 from mcap.writer import CompressionType, Writer
 
-from isaac.diagnostics import state_hash
-from isaac.records import Contacts, StepRecord
+from isaac.engine.diagnostics import state_hash
+from isaac.engine.records import Contacts, StepRecord
 from isaac.scene import load_scene, load_scene_text
-from isaac.simulation import Simulation
+from isaac.engine.simulation import Simulation
 from recorder import Recorder
 from recorder import schema as S
 from recorder.mcap_writer import encode_bodies, encode_contacts

@@ -51,9 +51,9 @@ def test_runs_with_different_hash_seeds_write_identical_logs(tmp_path):
 
 _HASHES_SCRIPT = """
 import json, sys
-from isaac.diagnostics import state_hash
+from isaac.engine.diagnostics import state_hash
 from isaac.scene import load_scene
-from isaac.simulation import Simulation
+from isaac.engine.simulation import Simulation
 out = {}
 for name, steps in json.loads(sys.argv[1]):
     sim = Simulation(load_scene(f"scenes/{name}.yaml"))

@@ -10,10 +10,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from isaac.cli import main
-from isaac.diagnostics import state_hash
+from isaac.app.cli import main
+from isaac.engine.diagnostics import state_hash
 from isaac.errors import LogError, SceneError
-from isaac.simulation import Simulation
+from isaac.engine.simulation import Simulation
 from recorder import Recorder
 from replay.compare import diff_logs, replay_log, ulp_distance, ulp_distances
 from replay.reader import RawLog
@@ -455,7 +455,7 @@ def test_the_replay_encoder_writes_the_reference_encoders_bytes(scene):
     import dataclasses
 
     from recorder.mcap_writer import encode_bodies, encode_contacts, encode_stats
-    from recorder.recording import compute_stats
+    from recorder.stats import compute_stats
     from replay.compare import StepEncoder
 
     scene, _ = scene_from(scene, steps=None)

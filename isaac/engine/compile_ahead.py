@@ -2,13 +2,13 @@
 
 With an empty numba cache the first step compiles every kernel it reaches, one after the other,
 in this process: about 14 s on the 2-core benchmark machine, over half of it the impulse solver
-(`isaac.impulse._solve_sequential` and the kernels it calls, ~7.8 s; detection, push-out and
+(`isaac.engine.solver.sequential.solve_sequential` and the kernels it calls, ~7.8 s; detection, push-out and
 integration make up the rest). `prepare` splits that work: a helper process compiles the solver
 into the on-disk cache while this process compiles the other stages, then this process waits
 for the helper and loads the solver from the cache at its first call.
 
 Both sides compile by running the stages on a two-box scene with the simulation's own world
-settings (`Simulation(..., compile_ahead=False)`): numba specialises on argument types only
+settings (built from the stages' own pieces, never through `Simulation`, which calls this): numba specialises on argument types only
 (dtypes, dimensions, layouts), never on sizes or values, so the kernels compiled for the small
 scene are the ones the real scene calls. Nothing here changes what a step computes; if the
 helper cannot start or fails, this process compiles the solver itself, as it would without it.
@@ -28,10 +28,10 @@ _BOX = ((-0.5, -0.5), (0.5, -0.5), (0.5, 0.5), (-0.5, 0.5))
 
 
 def solver_kernel(settings):
-    """The compiled solver `isaac.impulse.solve_contacts` dispatches to for these settings."""
-    from isaac import impulse
+    """The compiled solver `isaac.engine.solver.solve_contacts` dispatches to for these settings."""
+    from isaac.engine.solver import seed, sequential
 
-    return impulse._solve_seed if settings.seed_solver else impulse._solve_sequential
+    return seed.solve_seed if settings.seed_solver else sequential.solve_sequential
 
 
 def is_cold(kernel) -> bool:
@@ -44,31 +44,44 @@ def is_cold(kernel) -> bool:
     return index is not None and not os.path.exists(index)
 
 
-def _small_scene(world):
-    """Two overlapping 1 m boxes (the lower one concrete) under `world`'s settings."""
-    from isaac.scene import BodySpec, Scene
+class _SmallWorld:
+    """Two overlapping 1 m boxes (the lower one concrete) under `world`'s settings, as the step's
+    stages take them."""
 
-    return Scene(name="compile-ahead", world=world, bodies=(
-        BodySpec(name="floor", vertices=_BOX, concrete=True),
-        BodySpec(name="box", vertices=_BOX, position=(0.0, 0.95))))
+    def __init__(self, world) -> None:
+        from isaac.engine.records import Contacts
+        from isaac.engine.step import ContactCache, StepSettings, Workspace
+        from isaac.engine.world import build_model, initial_state
+        from isaac.scene import BodySpec, Scene
+
+        scene = Scene(name="compile-ahead", world=world, bodies=(
+            BodySpec(name="floor", vertices=_BOX, concrete=True),
+            BodySpec(name="box", vertices=_BOX, position=(0.0, 0.95))))
+        self.dt = world.dt
+        self.model = build_model(scene)
+        self.settings = StepSettings.of(world)
+        self.state = initial_state(scene, self.model)
+        self.work = Workspace(self.model)
+        self.cache = ContactCache.of(Contacts.empty(), self.model.n_bodies)
 
 
-def prepare(sim) -> None:
-    """Before `sim`'s first step: if the solver is not in numba's cache, compile it in a helper
-    process while this one compiles the other stages (see the module docstring)."""
-    if not is_cold(solver_kernel(sim.settings)):
+def prepare(settings, world) -> None:
+    """Before the first step of a simulation with these StepSettings and WorldSettings: if the
+    solver is not in numba's cache, compile it in a helper process while this one compiles the
+    other stages (see the module docstring)."""
+    if not is_cold(solver_kernel(settings)):
         return
-    helper = _start_helper(sim.scene.world)
+    helper = _start_helper(world)
     if helper is None:
         return
     try:
-        from isaac.simulation import Simulation
-        from isaac.step import step
+        from isaac.engine.integrate import diverged_body
+        from isaac.engine.step import step
 
-        small = Simulation(_small_scene(sim.scene.world), compile_ahead=False)
-        step(small.model, small.settings, small.scene.world.dt, small.state, small._work,
-             small._cache, solve=False)
-        small._diverged()
+        small = _SmallWorld(world)
+        step(small.model, small.settings, small.dt, small.state, small.work, small.cache,
+             solve=False)
+        diverged_body(small.state)
         helper.wait(timeout=HELPER_TIMEOUT_S)
     except BaseException as exc:  # Ctrl-C, a failure here, a stuck helper: no orphan left
         helper.kill()
@@ -78,12 +91,12 @@ def prepare(sim) -> None:
 
 
 def _start_helper(world) -> subprocess.Popen | None:
-    """`python -m isaac.compile_ahead` with `world` pickled on its standard input, or None."""
-    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    """`python -m isaac.engine.compile_ahead` with `world` pickled on its standard input, or None."""
+    root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
     env = dict(os.environ)
     env["PYTHONPATH"] = os.pathsep.join(p for p in (root, env.get("PYTHONPATH")) if p)
     try:
-        proc = subprocess.Popen([sys.executable, "-m", "isaac.compile_ahead"],
+        proc = subprocess.Popen([sys.executable, "-m", "isaac.engine.compile_ahead"],
                                 stdin=subprocess.PIPE, stdout=subprocess.DEVNULL,
                                 stderr=subprocess.DEVNULL, env=env)
         with proc.stdin:
@@ -96,11 +109,10 @@ def _start_helper(world) -> subprocess.Popen | None:
 def _compile_solver(world) -> None:
     """The helper's work: one call of the solver stage, on no contact rows (it compiles all the
     same, and numba writes it to the cache)."""
-    from isaac.simulation import Simulation
-    from isaac.step import resolve
+    from isaac.engine.step import resolve
 
-    small = Simulation(_small_scene(world), compile_ahead=False)
-    resolve(small.model, small.settings, small.state, small._work, small._cache, 0)
+    small = _SmallWorld(world)
+    resolve(small.model, small.settings, small.state, small.work, small.cache, 0)
 
 
 if __name__ == "__main__":

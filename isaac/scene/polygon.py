@@ -21,7 +21,7 @@ import math
 
 import numpy as np
 
-from isaac.scene import MAX_VERTICES
+from isaac.scene.limits import MAX_VERTICES
 
 DUPLICATE_TOLERANCE = 1e-9  # x L: vertices this close are the same vertex
 AREA_TOLERANCE = 1e-9  # x L^2: smallest accepted area

@@ -8,16 +8,14 @@ from dataclasses import dataclass
 import numpy as np
 
 from isaac.errors import SimulationError
-from isaac.records import Contacts, StepRecord
+from isaac.engine.records import Contacts, StepRecord
 from isaac.scene import Scene
-from isaac.integrate import first_diverged
-from isaac.step import ContactCache, StepSettings, Workspace, detect, step
-from isaac.world import Model, State, build_model, initial_state
+from isaac.engine.integrate import (DIVERGED_ANGLE, DIVERGED_POSITION, DIVERGED_SPEED,
+                                    diverged_body)
+from isaac.engine.step import ContactCache, StepSettings, Workspace, detect, step
+from isaac.engine.world import Model, State, build_model, initial_state
 
-# Beyond these the state has diverged (a 1 km body at 1e6 m moving at 1e4 m/s is far inside).
-DIVERGED_POSITION = 1e12  # m
-DIVERGED_SPEED = 1e12  # m/s or rad/s
-DIVERGED_ANGLE = 8.0  # rad: wrapped angles stay within pi
+__all__ = ["DIVERGED_ANGLE", "DIVERGED_POSITION", "DIVERGED_SPEED", "BodyView", "Simulation"]
 _FIELDS = ("position", "velocity", "angle", "angular velocity")
 
 
@@ -33,7 +31,7 @@ class Simulation:
     def __init__(self, scene: Scene, *, start: StepRecord | None = None,
                  compile_ahead: bool = True) -> None:
         """compile_ahead: on a machine whose numba cache lacks the solver, compile the step's
-        kernels in two processes at once before the first step (`isaac.compile_ahead`)."""
+        kernels in two processes at once before the first step (`isaac.engine.compile_ahead`)."""
         self.scene = scene
         self.model: Model = build_model(scene)
         self.settings = StepSettings.of(scene.world)
@@ -45,9 +43,9 @@ class Simulation:
         if start is not None:
             self.resume(start)
         if compile_ahead:
-            from isaac.compile_ahead import prepare
+            from isaac.engine.compile_ahead import prepare
 
-            prepare(self)
+            prepare(self.settings, scene.world)
 
     def resume(self, record: StepRecord) -> None:
         """Continue from a record of this scene (a logged keyframe), keeping the model.
@@ -107,9 +105,7 @@ class Simulation:
     def _diverged(self) -> tuple[int, int]:
         """(body, index into _FIELDS) of the first body whose state is non-finite or beyond the
         DIVERGED_* bounds, or (-1, -1)."""
-        s = self.state
-        return first_diverged(s.position, s.angle, s.velocity, s.angular_velocity, s.exists,
-                              DIVERGED_POSITION, DIVERGED_SPEED, DIVERGED_ANGLE)
+        return diverged_body(self.state)
 
     def run(self, steps: int | None = None) -> Iterator[StepRecord]:
         """Yield the records of the next `steps` steps (default: the scene's `world.steps`)."""

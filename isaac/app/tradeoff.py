@@ -41,9 +41,9 @@ from pathlib import Path
 
 import numpy as np
 
-from isaac import diagnostics
+from isaac.engine import diagnostics
 from isaac.errors import IsaacError, SceneError, SimulationError
-from isaac.records import Contacts, StepRecord
+from isaac.engine.records import Contacts, StepRecord
 from isaac.scene import PRESETS, Scene, WorldSettings, load_scene, load_scene_text
 
 PRESET_ORDER = ("seed", "fast", "balanced", "accurate")
@@ -239,7 +239,7 @@ def simulate(scene: Scene, times: np.ndarray, *, check: bool = True) -> Trajecto
     With `check`, also tracks the largest contact depth and tunneling through concrete bodies.
     A SimulationError ends the run: samples after it are NaN and `error` says why.
     """
-    from isaac.simulation import Simulation
+    from isaac.engine.simulation import Simulation
 
     sim = Simulation(scene)
     dt = scene.world.dt
@@ -301,7 +301,7 @@ def simulate(scene: Scene, times: np.ndarray, *, check: bool = True) -> Trajecto
 def time_run(scene: Scene) -> float:
     """Wall-clock seconds of `scene.world.steps` steps (Simulation built before the clock
     starts, garbage collector paused); inf if the run stops with a SimulationError."""
-    from isaac.simulation import Simulation
+    from isaac.engine.simulation import Simulation
 
     sim = Simulation(scene)
     collecting = gc.isenabled()
@@ -335,7 +335,7 @@ def time_runs(scene: Scene, repeats: int, min_seconds: float = MIN_TIMED_SECONDS
 
 def warm_up(scene: Scene) -> None:
     """One step, so the kernels this setting uses are compiled (or loaded) before timing."""
-    from isaac.simulation import Simulation
+    from isaac.engine.simulation import Simulation
 
     try:
         Simulation(scene).step()
@@ -347,7 +347,7 @@ def warm_up(scene: Scene) -> None:
 
 def _world_vertices(body) -> np.ndarray:
     """Vertices (m, world) of a body at its starting pose, about its centroid."""
-    from isaac import polygon
+    from isaac.scene import polygon
 
     raw = np.asarray(body.vertices, dtype=np.float64)
     _, centroid, _ = polygon.mass_properties(raw)
@@ -433,7 +433,7 @@ def analytic_trajectory(scene: Scene, times: np.ndarray) -> Trajectory:
         raise TradeoffError("--reference analytic: no closed form known for this scene (known: "
                             "a lone body in flight, a flat drop on level concrete ground, a "
                             "1D head-on hit of two bodies without gravity)")
-    from isaac.world import build_model
+    from isaac.engine.world import build_model
 
     model = build_model(scene)
     w = scene.world
@@ -617,7 +617,7 @@ def measure(scene: Scene, grid: list[GridPoint], *, reference: str = "accurate",
     repeats: rounds of timed runs over the whole grid; a point's cost is the median of its timed
         runs. Short runs are repeated until `min_seconds` were timed (timer noise).
     """
-    from isaac.world import build_model
+    from isaac.engine.world import build_model
 
     if repeats < 1:
         raise TradeoffError(f"--repeats must be >= 1, got {repeats}")

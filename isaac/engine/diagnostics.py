@@ -12,7 +12,7 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
-from isaac.records import StepRecord, state_hash  # noqa: F401 - re-exported
+from isaac.engine.records import StepRecord, state_hash  # noqa: F401 - re-exported
 
 
 @dataclass(frozen=True)

@@ -22,8 +22,8 @@ import math
 
 import numpy as np
 
-from isaac.polygon import box_vertices, mass_properties
-from isaac.scene import BodySpec
+from isaac.scene.polygon import box_vertices, mass_properties
+from isaac.scene.spec import BodySpec
 
 # Each pile body gets a square cell of side CELL_MARGIN * 2 * max radius, so bodies start apart.
 CELL_MARGIN = 1.05

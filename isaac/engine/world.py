@@ -16,7 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from isaac import polygon
+from isaac.scene import polygon
 from isaac.scene import Scene
 
 

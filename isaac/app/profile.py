@@ -1,6 +1,6 @@
 """Per-stage timings for `isaac run --profile`.
 
-Wraps the stage kernels that `isaac.step` calls with timers (wall time, perf_counter), so the
+Wraps the stage kernels that `isaac.engine.step` calls with timers (wall time, perf_counter), so the
 step runs unchanged and pays nothing when profiling is off. Timings include the call overhead of
 each kernel, which is part of what a step costs.
 """
@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import time
 
-from isaac import step as step_module
+from isaac.engine import step as step_module
 
 STAGES = {
     "transform": "geometry",

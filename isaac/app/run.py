@@ -8,7 +8,7 @@ import sys
 import time
 from pathlib import Path
 
-from isaac import diagnostics
+from isaac.engine import diagnostics
 from isaac.errors import IsaacError, SimulationError
 from isaac.scene import load_scene
 
@@ -50,7 +50,7 @@ class _StopRequest:
 
 
 def cmd_run(args: argparse.Namespace) -> int:
-    from isaac.simulation import Simulation  # imported here: compiling kernels is not needed for --help
+    from isaac.engine.simulation import Simulation  # imported here: compiling kernels is not needed for --help
 
     started = time.perf_counter()
     scene = load_scene(args.scene)
@@ -59,7 +59,7 @@ def cmd_run(args: argparse.Namespace) -> int:
         raise IsaacError(f"--steps must be >= 0, got {steps}")
     sim = Simulation(scene)
     if args.profile:
-        from isaac.profile import enable_profiling
+        from isaac.app.profile import enable_profiling
         profiler = enable_profiling()
     recorder = None
     if args.mcap or args.rrd:

@@ -14,7 +14,7 @@ import sys
 from isaac.errors import IsaacError
 
 # Modules that add sub-commands; a module that is not there (yet) is skipped.
-COMMAND_MODULES = ("isaac.commands", "recorder.cli", "replay.cli", "isaac.tradeoff")
+COMMAND_MODULES = ("isaac.app.run", "isaac.app.logs", "isaac.app.verify", "isaac.app.tradeoff")
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -47,6 +47,19 @@ def advance_positions(position, angle, velocity, angular_velocity, movable, exis
             angle[i] = a
 
 
+# Beyond these the state has diverged (a 1 km body at 1e6 m moving at 1e4 m/s is far inside).
+DIVERGED_POSITION = 1e12  # m
+DIVERGED_SPEED = 1e12  # m/s or rad/s
+DIVERGED_ANGLE = 8.0  # rad: wrapped angles stay within pi
+
+
+def diverged_body(state) -> tuple[int, int]:
+    """`first_diverged` of an `isaac.engine.world.State` against the DIVERGED_* bounds."""
+    s = state
+    return first_diverged(s.position, s.angle, s.velocity, s.angular_velocity, s.exists,
+                          DIVERGED_POSITION, DIVERGED_SPEED, DIVERGED_ANGLE)
+
+
 @numba.njit(cache=True, nogil=True)
 def first_diverged(position, angle, velocity, angular_velocity, exists, position_limit,
                    speed_limit, angle_limit):

@@ -23,15 +23,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from isaac.broad_phase import find_pairs, speculative_reach
-from isaac.geometry import transform
-from isaac.impulse import RULE_CODES, solve_contacts
-from isaac.integrate import add_gravity, advance_positions
-from isaac.narrow_phase import collide_pairs, match_previous
-from isaac.push_out import FULL, NONE, PARTIAL, push_out
-from isaac.records import Contacts
+from isaac.engine.broad_phase import find_pairs, speculative_reach
+from isaac.engine.geometry import transform
+from isaac.engine.solver import RULE_CODES, solve_contacts
+from isaac.engine.integrate import add_gravity, advance_positions
+from isaac.engine.narrow_phase import collide_pairs, match_previous
+from isaac.engine.push_out import FULL, NONE, PARTIAL, push_out
+from isaac.engine.records import Contacts
 from isaac.scene import WorldSettings
-from isaac.world import Model, State
+from isaac.engine.world import Model, State
 
 _CORRECTION = {"full": FULL, "partial": PARTIAL, "none": NONE}
 
@@ -202,7 +202,7 @@ def substep(model: Model, cfg: StepSettings, state: State, work: Workspace,
             cache: ContactCache, index: int, solve: bool = True) -> Contacts:
     """Advance the state by one sub-step of cfg.h seconds; return the contacts resolved.
 
-    solve: False skips the impulses (stage 5); only `isaac.compile_ahead` does, to compile the
+    solve: False skips the impulses (stage 5); only `isaac.engine.compile_ahead` does, to compile the
     other stages while another process compiles the solver.
     """
     rows = detect(model, cfg, state, work, cache)
@@ -228,7 +228,7 @@ def step(model: Model, cfg: StepSettings, dt: float, state: State, work: Workspa
          cache: ContactCache, solve: bool = True) -> tuple[Contacts, ContactCache]:
     """Advance `state` in place from step k to k + 1; return its contacts and the new cache.
 
-    solve: as in `substep` (always True outside `isaac.compile_ahead`)."""
+    solve: as in `substep` (always True outside `isaac.engine.compile_ahead`)."""
     parts = []
     for index in range(cfg.substeps):
         contacts = substep(model, cfg, state, work, cache, index, solve)

@@ -1,0 +1,188 @@
+"""The sequential-impulse solver: accumulated, clamped impulses, warm started, `iterations`
+passes over the scheduled units."""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+
+from isaac.engine.solver.mixing import combine
+from isaac.engine.solver.passes import run_passes
+from isaac.engine.solver.rows import apply_bounce_back, row_terms
+from isaac.engine.solver.schedule import (
+    G12, GM11, GM12, GM22, GROUP_WIDTH, LANES, ROW2, R_JN, R_JT, R_K, R_MT, R_MU, R_NX, R_NY, R_RNA,
+    R_RNB, R_RTA, R_RTB, R_TG, UNIT_BLOCK, layout_table, schedule,
+)
+
+@numba.njit(cache=True, nogil=True)
+def solve_sequential(rows, c_a, c_b, c_feature, c_slot, c_point, c_normal, c_depth,
+                      c_previous, position, velocity, angular_velocity, inv_mass, inv_inertia,
+                      gravity_dv, restitution, friction, restitution_rule, friction_rule,
+                      restitution_threshold, friction_on, iterations, warm_starting, h,
+                      prev_impulse, prev_tangent, c_impulse, c_tangent, c_restitution, c_push_a,
+                      c_push_b, table):
+    """solve_contacts with the sequential solver: accumulated, clamped impulses, warm started,
+    `iterations` Gauss-Seidel passes over every unit.
+
+    Lays the group table of schedule's groups out in `table` (or a larger one, returned) and
+    fills it with each row's terms, applies the warm-start impulses (last step's accumulated
+    impulses of the same contact points, in row order), runs the passes, and writes the
+    accumulated impulses to c_impulse / c_tangent. (Several small kernels rather than one: numba
+    compiles them in a fraction of the time.)
+    """
+    n = velocity.shape[0]
+    v = np.empty((n, 3))  # the velocities (vx, vy, w) and inverse masses, packed per body
+    inv = np.empty((n, 2))
+    for i in range(n):
+        v[i, 0] = velocity[i, 0]
+        v[i, 1] = velocity[i, 1]
+        v[i, 2] = angular_velocity[i]
+        inv[i, 0] = inv_mass[i]
+        inv[i, 1] = inv_inertia[i]
+    kind, lane_row, block = schedule(rows, c_a, c_b, c_slot, c_point, c_normal, position,
+                                      inv, n)
+    groups = kind.shape[0]
+    if table.shape[0] < groups * GROUP_WIDTH + 3 * LANES:
+        table = np.empty(2 * (groups * GROUP_WIDTH + 3 * LANES))
+    where, successor, first, fixed, fixed_body = layout_table(table, kind, lane_row, rows, c_a, c_b,
+                                                         inv)
+    bounce_back = np.zeros(rows)  # (1 + e u_b / u) g of speculative rows that bounce (m)
+    warm = fill_rows(table, where, block, rows, c_a, c_b, c_point, c_normal, c_depth,
+                      c_previous, position, v, inv, gravity_dv, restitution, friction,
+                      restitution_rule, friction_rule, restitution_threshold, friction_on,
+                      warm_starting, h, prev_impulse, prev_tangent, c_restitution, bounce_back)
+    t = table
+    if warm_starting:
+        # applied in row order: -P to a, +P to b
+        for k in range(rows):
+            if c_previous[k] < 0:
+                continue
+            a = c_a[k]
+            b = c_b[k]
+            px = warm[k, 0]
+            py = warm[k, 1]
+            v[a, 0] -= px * inv[a, 0]
+            v[a, 1] -= py * inv[a, 0]
+            v[a, 2] -= warm[k, 2] * inv[a, 1]
+            v[b, 0] += px * inv[b, 0]
+            v[b, 1] += py * inv[b, 0]
+            v[b, 2] += warm[k, 3] * inv[b, 1]
+    # the velocities into each moving body's first unit and every unit side with a concrete body
+    for body in range(n):
+        at = first[body]
+        if at >= 0:
+            t[at] = v[body, 0]
+            t[at + LANES] = v[body, 1]
+            t[at + 2 * LANES] = v[body, 2]
+    for f in range(fixed.shape[0]):
+        at = fixed[f]
+        body = fixed_body[f]
+        t[at] = v[body, 0]
+        t[at + LANES] = v[body, 1]
+        t[at + 2 * LANES] = v[body, 2]
+
+    run_passes(t, kind, successor, groups, iterations)
+
+    # the velocities the passes handed back to each moving body's first unit, and every row's
+    # accumulated impulses
+    for body in range(n):
+        at = first[body]
+        if at >= 0:
+            v[body, 0] = t[at]
+            v[body, 1] = t[at + LANES]
+            v[body, 2] = t[at + 2 * LANES]
+    for g in range(groups):
+        base = g * GROUP_WIDTH
+        for j in range(LANES):
+            k = lane_row[g * LANES + j]
+            if k < 0:
+                continue
+            c_impulse[k] = t[base + R_JN + j]
+            c_tangent[k] = t[base + R_JT + j]
+            if kind[g] == UNIT_BLOCK:
+                c_impulse[k + 1] = t[base + ROW2 + R_JN + j]
+                c_tangent[k + 1] = t[base + ROW2 + R_JT + j]
+    for i in range(n):
+        velocity[i, 0] = v[i, 0]
+        velocity[i, 1] = v[i, 1]
+        angular_velocity[i] = v[i, 2]
+    apply_bounce_back(rows, c_a, c_b, c_feature, c_slot, c_point, c_normal, bounce_back, inv,
+                 position, c_push_a, c_push_b)
+    return table
+
+
+@numba.njit(cache=True, nogil=True)
+def fill_rows(t, where, block, rows, c_a, c_b, c_point, c_normal, c_depth, c_previous,
+               position, v, inv, gravity_dv, restitution, friction, restitution_rule,
+               friction_rule, restitution_threshold, friction_on, warm_starting, h,
+               prev_impulse, prev_tangent, c_restitution, bounce_back):
+    """Each row's terms into its table columns, in row order, with a block's K12 and K^-1;
+    the restitution used and the bounce-back distances; and the warm-start impulse (last
+    step's accumulated impulses of the same contact point) as it will be applied: returns
+    (rows, 4) P = (px, py) and the torques r x P of a and b."""
+    warm = np.empty((rows, 4))
+    rna1 = 0.0
+    rnb1 = 0.0
+    kn1 = 0.0
+    mu_a = -1  # the pair whose friction coefficient mu is
+    mu_b = -1
+    mu = 0.0
+    for k in range(rows):
+        a = c_a[k]
+        b = c_b[k]
+        nx = c_normal[k, 0]
+        ny = c_normal[k, 1]
+        rna, rnb, rta, rtb, kn, kt, mt, target, e, bounce = row_terms(
+            nx, ny, c_point[k, 0], c_point[k, 1], position[a, 0], position[a, 1],
+            position[b, 0], position[b, 1], inv[a, 0], inv[a, 1], inv[b, 0], inv[b, 1],
+            v[a, 0], v[a, 1], v[a, 2], v[b, 0], v[b, 1], v[b, 2], c_depth[k],
+            restitution[a], restitution[b], gravity_dv[0], gravity_dv[1], restitution_rule,
+            restitution_threshold, h)
+        if a != mu_a or b != mu_b:  # (consecutive rows are often one pair's)
+            mu = combine(friction_rule, friction[a], friction[b]) if friction_on else 0.0
+            mu_a = a
+            mu_b = b
+        c_restitution[k] = e
+        bounce_back[k] = bounce
+        jn = 0.0
+        jt = 0.0
+        p = c_previous[k]
+        if warm_starting and p >= 0:
+            jn = prev_impulse[p]
+            jt = prev_tangent[p] if mu > 0.0 else 0.0
+        warm[k, 0] = jn * nx - jt * ny
+        warm[k, 1] = jn * ny + jt * nx
+        warm[k, 2] = jn * rna + jt * rta
+        warm[k, 3] = jn * rnb + jt * rtb
+        second = k > 0 and block[k - 1]
+        at = where[k]
+        t[at + R_NX] = nx
+        t[at + R_NY] = ny
+        t[at + R_MU] = mu
+        t[at + R_RTA] = rta
+        t[at + R_RTB] = rtb
+        t[at + R_MT] = mt
+        t[at + R_RNA] = rna
+        t[at + R_RNB] = rnb
+        t[at + R_TG] = target
+        t[at + R_JN] = jn
+        t[at + R_JT] = jt
+        if block[k] or second:
+            t[at + R_K] = kn
+        else:
+            t[at + R_K] = 1.0 / kn if kn > 0.0 else 0.0
+        if second:
+            # the block's 2x2 effective mass K of both points and its inverse
+            a = c_a[k - 1]
+            b = c_b[k - 1]
+            k12 = inv[a, 0] + inv[b, 0] + rna1 * rna * inv[a, 1] + rnb1 * rnb * inv[b, 1]
+            det = kn1 * kn - k12 * k12
+            at = where[k - 1]
+            t[at + G12] = k12
+            t[at + GM11] = kn / det
+            t[at + GM12] = -k12 / det
+            t[at + GM22] = kn1 / det
+        rna1 = rna
+        rnb1 = rnb
+        kn1 = kn
+    return warm

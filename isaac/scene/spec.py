@@ -1,0 +1,57 @@
+"""The validated scene: `Scene` and its bodies' `BodySpec`s, plain frozen data."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from isaac.scene.settings import WorldSettings
+
+@dataclass(frozen=True)
+class BodySpec:
+    """One body as the scene gives it (generators already expanded).
+
+    name: unique name.
+    vertices: polygon vertices (m) exactly as given (box / regular shapes already turned into
+        vertices), counter-clockwise, 3..50 of them, convex. Not yet re-centred: the world builder
+        re-centres them on their centroid (the seed's LocalSpaceList is relative to the centre of
+        mass), so the same BodySpec always gives the same bits.
+    position: world position of the centre of mass (m).
+    angle: rad, counter-clockwise.
+    velocity: m/s, world frame.
+    angular_velocity: rad/s, counter-clockwise.
+    density: kg/m^2 (mass = area * density).
+    restitution: e in [0, 1].
+    friction: Coulomb coefficient >= 0 (used only when the world's friction is on).
+    concrete: immovable (infinite mass and inertia), the seed's IsConcrete.
+    enters_at: time (s) from which the body exists (the seed's Exist).
+    leaves_at: time (s) at which the body stops existing, or None.
+    """
+
+    name: str
+    vertices: tuple[tuple[float, float], ...]
+    position: tuple[float, float] = (0.0, 0.0)
+    angle: float = 0.0
+    velocity: tuple[float, float] = (0.0, 0.0)
+    angular_velocity: float = 0.0
+    density: float = 1.0
+    restitution: float = 0.0
+    friction: float = 0.5
+    concrete: bool = False
+    enters_at: float = 0.0
+    leaves_at: float | None = None
+
+
+@dataclass(frozen=True)
+class Scene:
+    """A validated scene: world settings and bodies, every generator expanded.
+
+    name: the scene's name (from the file, or its stem).
+    source: where it came from (path or "<text>"), for messages.
+    analytic: optional analytic reference the scene declares (used by `isaac tradeoff`), or None.
+    """
+
+    name: str
+    world: WorldSettings
+    bodies: tuple[BodySpec, ...]
+    source: str = "<scene>"
+    analytic: dict | None = None
