@@ -51,8 +51,8 @@ class LocalPolygons:
         for k, body in enumerate(scene.bodies):
             v = np.asarray(body.vertices, dtype=float)
             a, c = polygon_centroid(v)
-            verts[k, :len(v)] = v - c
-            verts[k, len(v):] = v[-1] - c
+            verts[k, : len(v)] = v - c
+            verts[k, len(v) :] = v[-1] - c
             count[k] = len(v)
             area[k] = a
         concrete = np.array([b.concrete for b in scene.bodies], dtype=bool)

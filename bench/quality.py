@@ -32,8 +32,9 @@ def world_vertices(polys: LocalPolygons, positions: np.ndarray, angles: np.ndarr
     return out
 
 
-def candidate_pairs(verts_world: np.ndarray,
-                    skip: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+def candidate_pairs(
+    verts_world: np.ndarray, skip: np.ndarray | None = None
+) -> tuple[np.ndarray, np.ndarray]:
     """Pairs (i < j) whose axis-aligned boxes overlap, by sort-and-sweep on x (vectorised).
 
     skip: (n,) bool; pairs where both bodies are flagged (e.g. two static walls) are dropped.
@@ -67,8 +68,9 @@ def candidate_pairs(verts_world: np.ndarray,
     return i[sort], j[sort]
 
 
-def _max_face_separation(va: np.ndarray, ca: np.ndarray, vb: np.ndarray,
-                         cb: np.ndarray) -> np.ndarray:
+def _max_face_separation(
+    va: np.ndarray, ca: np.ndarray, vb: np.ndarray, cb: np.ndarray
+) -> np.ndarray:
     """For each pair, max over a's faces of min over b's vertices of n_face . (v_b - v_face).
 
     va, vb: (P, V, 2) world vertices, counter-clockwise, padded by repeating the last vertex;
@@ -97,18 +99,19 @@ def _max_face_separation(va: np.ndarray, ca: np.ndarray, vb: np.ndarray,
     return sep.max(axis=1)
 
 
-def pair_depths(polys: LocalPolygons, positions: np.ndarray, angles: np.ndarray,
-                *, chunk: int = 20000) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def pair_depths(
+    polys: LocalPolygons, positions: np.ndarray, angles: np.ndarray, *, chunk: int = 20000
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(i, j, depth) of every candidate pair; depth > 0 means the polygons overlap by that (m)."""
     verts = world_vertices(polys, np.asarray(positions, float), np.asarray(angles, float))
     i, j = candidate_pairs(verts, skip=polys.concrete)
     depth = np.empty(i.shape[0])
     for s in range(0, i.shape[0], chunk):
-        a, b = i[s:s + chunk], j[s:s + chunk]
+        a, b = i[s : s + chunk], j[s : s + chunk]
         va, vb = verts[a], verts[b]
         ca, cb = polys.vertex_count[a], polys.vertex_count[b]
         sep = np.maximum(_max_face_separation(va, ca, vb, cb), _max_face_separation(vb, cb, va, ca))
-        depth[s:s + chunk] = -sep
+        depth[s : s + chunk] = -sep
     return i, j, depth
 
 
@@ -119,9 +122,11 @@ def overlap_stats(polys: LocalPolygons, positions: np.ndarray, angles: np.ndarra
     touching = depth[depth > 0.0]
     if touching.size == 0:
         return dict(max_overlap_m=0.0, p99_overlap_m=0.0, touching_pairs=0)
-    return dict(max_overlap_m=float(touching.max()),
-                p99_overlap_m=float(np.percentile(touching, 99)),
-                touching_pairs=int(touching.size))
+    return dict(
+        max_overlap_m=float(touching.max()),
+        p99_overlap_m=float(np.percentile(touching, 99)),
+        touching_pairs=int(touching.size),
+    )
 
 
 def max_overlap(polys: LocalPolygons, positions: np.ndarray, angles: np.ndarray) -> float:
@@ -129,9 +134,17 @@ def max_overlap(polys: LocalPolygons, positions: np.ndarray, angles: np.ndarray)
     return overlap_stats(polys, positions, angles)["max_overlap_m"]
 
 
-def pyramid_quality(start: np.ndarray, end: np.ndarray, start_angle: np.ndarray,
-                    end_angle: np.ndarray, dynamic: np.ndarray, top: int, *,
-                    tolerance: float, angle_tolerance: float = 0.05) -> dict:
+def pyramid_quality(
+    start: np.ndarray,
+    end: np.ndarray,
+    start_angle: np.ndarray,
+    end_angle: np.ndarray,
+    dynamic: np.ndarray,
+    top: int,
+    *,
+    tolerance: float,
+    angle_tolerance: float = 0.05,
+) -> dict:
     """Top box drift (m) from its start, and whether the pyramid stands: every dynamic box within
     `tolerance` (m) of its start sideways, not lower than its start by more than `tolerance`, and
     turned by at most `angle_tolerance` (rad). The bench uses half a box and 0.1 rad: a box that
@@ -143,13 +156,18 @@ def pyramid_quality(start: np.ndarray, end: np.ndarray, start_angle: np.ndarray,
     turned = end_angle[dynamic] - start_angle[dynamic]
     turn = np.abs(np.remainder(turned + np.pi, 2 * np.pi) - np.pi)
     top_d = end[top] - start[top]
-    return dict(top_drift_m=float(np.hypot(*top_d)),
-                top_drift_xy_m=[float(top_d[0]), float(top_d[1])],
-                max_sideways_m=float(np.abs(d[:, 0]).max()),
-                max_sink_m=float(max(0.0, -d[:, 1].min())),
-                max_turn_rad=float(turn.max()),
-                standing=bool(np.abs(d[:, 0]).max() <= tolerance and -d[:, 1].min() <= tolerance
-                              and turn.max() <= angle_tolerance))
+    return dict(
+        top_drift_m=float(np.hypot(*top_d)),
+        top_drift_xy_m=[float(top_d[0]), float(top_d[1])],
+        max_sideways_m=float(np.abs(d[:, 0]).max()),
+        max_sink_m=float(max(0.0, -d[:, 1].min())),
+        max_turn_rad=float(turn.max()),
+        standing=bool(
+            np.abs(d[:, 0]).max() <= tolerance
+            and -d[:, 1].min() <= tolerance
+            and turn.max() <= angle_tolerance
+        ),
+    )
 
 
 def exchange_error(v0: np.ndarray, v_end: np.ndarray) -> float:

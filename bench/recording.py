@@ -22,7 +22,6 @@ import time
 
 from bench.scenes import build, with_preset
 
-
 BLOCK = 100  # steps per timed block
 
 
@@ -70,15 +69,30 @@ def _time_paired(scene, steps: int, mcap_path=None, rrd_path=None) -> dict:
         done += n
     t0 = time.perf_counter()
     rec.close()
-    return {"plain_ms_per_step": 1000.0 * t_plain / steps,
-            "ms_per_step": 1000.0 * t_rec / steps, "overhead": t_rec / t_plain - 1.0,
-            "open_s": opened, "close_s": time.perf_counter() - t0}
+    return {
+        "plain_ms_per_step": 1000.0 * t_plain / steps,
+        "ms_per_step": 1000.0 * t_rec / steps,
+        "overhead": t_rec / t_plain - 1.0,
+        "open_s": opened,
+        "close_s": time.perf_counter() - t0,
+    }
 
 
 def _time_in_process(scene_name: str, preset: str, steps: int, paths: dict) -> dict:
     """`_time_paired` in a process of its own (`--one`)."""
-    cmd = [sys.executable, "-m", "bench.recording", "--scene", scene_name, "--preset", preset,
-           "--steps", str(steps), "--one", json.dumps(paths)]
+    cmd = [
+        sys.executable,
+        "-m",
+        "bench.recording",
+        "--scene",
+        scene_name,
+        "--preset",
+        preset,
+        "--steps",
+        str(steps),
+        "--one",
+        json.dumps(paths),
+    ]
     proc = subprocess.run(cmd, capture_output=True, text=True, check=False, timeout=900)
     if proc.returncode != 0:
         tail = (proc.stderr or proc.stdout).strip().splitlines()[-1:] or [f"exit {proc.returncode}"]
@@ -100,15 +114,24 @@ def _available(module: str) -> str | None:
 def run(scene_name: str, preset: str, out_dir: str, reps: int, steps: int) -> dict:
     bench = build(scene_name)
     scene = with_preset(bench.scene, preset)
-    result: dict = {"kind": "recording", "scene": scene_name, "engine": f"isaac-{preset}",
-                    "bodies": len(scene.bodies), "steps": steps, "reps": reps, "notes": []}
+    result: dict = {
+        "kind": "recording",
+        "scene": scene_name,
+        "engine": f"isaac-{preset}",
+        "bodies": len(scene.bodies),
+        "steps": steps,
+        "reps": reps,
+        "notes": [],
+    }
     modes = {"plain": {}}
     missing = _available("recorder")
     if missing:
         result["notes"].append(f"recording skipped: {missing}")
     else:
-        for mode, module, key in (("mcap", "recorder.mcap_writer", "mcap_path"),
-                                  ("rerun", "recorder.rerun_writer", "rrd_path")):
+        for mode, module, key in (
+            ("mcap", "recorder.mcap_writer", "mcap_path"),
+            ("rerun", "recorder.rerun_writer", "rrd_path"),
+        ):
             why = _available(module)
             if why:
                 result["notes"].append(f"{mode} skipped: {why}")
@@ -135,18 +158,23 @@ def run(scene_name: str, preset: str, out_dir: str, reps: int, steps: int) -> di
     done = {m: rs for m, rs in runs.items() if rs}
     medians = {}
     if done:
-        medians["plain"] = statistics.median(r["plain_ms_per_step"] for rs in done.values()
-                                             for r in rs)
+        medians["plain"] = statistics.median(
+            r["plain_ms_per_step"] for rs in done.values() for r in rs
+        )
     medians.update({m: statistics.median(r["ms_per_step"] for r in rs) for m, rs in done.items()})
     result["ms_per_step"] = medians
-    result["method"] = (f"plain and recorded simulations in lockstep, alternating blocks of "
-                        f"{BLOCK} steps in one process, {reps} processes per mode")
-    result["overhead_fraction"] = {m: statistics.median(r["overhead"] for r in rs)
-                                   for m, rs in done.items()}
+    result["method"] = (
+        f"plain and recorded simulations in lockstep, alternating blocks of "
+        f"{BLOCK} steps in one process, {reps} processes per mode"
+    )
+    result["overhead_fraction"] = {
+        m: statistics.median(r["overhead"] for r in rs) for m, rs in done.items()
+    }
     result["overhead_reps"] = {m: [r["overhead"] for r in rs] for m, rs in done.items()}
     if "plain" in medians:
-        result["overhead_ms_per_step"] = {m: medians["plain"] * f
-                                          for m, f in result["overhead_fraction"].items()}
+        result["overhead_ms_per_step"] = {
+            m: medians["plain"] * f for m, f in result["overhead_fraction"].items()
+        }
     for key in ("open_s", "close_s"):
         result[key] = {m: statistics.median(r[key] for r in rs) for m, rs in done.items()}
     for mode in ("mcap", "rerun"):
@@ -184,8 +212,10 @@ def replay_speed(scene, out_dir: str, steps: int, plain_ms: float | None) -> dic
         out = compare(str(scene_path), REPLAY_REPS, Path(out_dir) / "replay", steps=steps)
     except RuntimeError as exc:
         return {"note": f"replay failed: {exc}", "identical": False}
-    out["command"] = (f"isaac run SCENE --mcap LOG --steps {steps} against isaac replay LOG, "
-                      f"{REPLAY_REPS} interleaved repetitions of each, whole processes")
+    out["command"] = (
+        f"isaac run SCENE --mcap LOG --steps {steps} against isaac replay LOG, "
+        f"{REPLAY_REPS} interleaved repetitions of each, whole processes"
+    )
     out["identical"] = True  # compare raises when a replay diverges
     if plain_ms:
         out["time_ratio_to_plain"] = (1000.0 / out["median_replay_steps_per_s"]) / plain_ms
@@ -208,8 +238,7 @@ def main(argv: list[str] | None = None) -> int:
     reuse_large_buffers()
     if args.one is not None:
         scene = with_preset(build(args.scene).scene, args.preset)
-        sys.stdout.write(json.dumps(_time_paired(scene, args.steps, **json.loads(args.one)))
-                         + "\n")
+        sys.stdout.write(json.dumps(_time_paired(scene, args.steps, **json.loads(args.one))) + "\n")
         return 0
     os.makedirs(args.out, exist_ok=True)
     result = run(args.scene, args.preset, args.out, args.reps, args.steps)

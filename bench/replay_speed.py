@@ -38,12 +38,15 @@ FINISH_RE = re.compile(r"files finished ([0-9.]+) s after the last step")
 
 def _isaac(*args: str) -> tuple[float, str]:
     t0 = time.perf_counter()
-    proc = subprocess.run([sys.executable, "-m", "isaac", *args], capture_output=True,
-                          text=True, cwd=REPO)
+    proc = subprocess.run(
+        [sys.executable, "-m", "isaac", *args], capture_output=True, text=True, cwd=REPO
+    )
     wall = time.perf_counter() - t0
     if proc.returncode != 0:
-        raise RuntimeError(f"isaac {' '.join(args)} failed ({proc.returncode}): "
-                           f"{proc.stderr.strip() or proc.stdout.strip()}")
+        raise RuntimeError(
+            f"isaac {' '.join(args)} failed ({proc.returncode}): "
+            f"{proc.stderr.strip() or proc.stdout.strip()}"
+        )
     return wall, proc.stdout
 
 
@@ -69,25 +72,46 @@ def compare(scene: str, reps: int, out_dir: Path, steps: int | None = None) -> d
         result = json.loads(report.read_text())
         if not result["identical"]:
             raise RuntimeError(f"the replay diverged: {replay_out.strip()}")
-        rows.append(dict(rep=rep, steps=result["steps_compared"], run_steps_per_s=run_rate,
-                         run_finish_s=finish,
-                         run_with_finish_steps_per_s=timed / (timed / run_rate + finish),
-                         replay_steps_per_s=result["steps_per_s"], run_wall_s=run_wall,
-                         replay_wall_s=replay_wall))
-    med = {k: statistics.median(r[k] for r in rows)
-           for k in ("run_steps_per_s", "run_with_finish_steps_per_s", "run_finish_s",
-                     "replay_steps_per_s", "run_wall_s", "replay_wall_s")}
+        rows.append(
+            dict(
+                rep=rep,
+                steps=result["steps_compared"],
+                run_steps_per_s=run_rate,
+                run_finish_s=finish,
+                run_with_finish_steps_per_s=timed / (timed / run_rate + finish),
+                replay_steps_per_s=result["steps_per_s"],
+                run_wall_s=run_wall,
+                replay_wall_s=replay_wall,
+            )
+        )
+    med = {
+        k: statistics.median(r[k] for r in rows)
+        for k in (
+            "run_steps_per_s",
+            "run_with_finish_steps_per_s",
+            "run_finish_s",
+            "replay_steps_per_s",
+            "run_wall_s",
+            "replay_wall_s",
+        )
+    }
     return dict(
-        scene=scene, steps=rows[0]["steps"], reps=reps, log_bytes=os.path.getsize(log),
-        rows=rows, **{f"median_{k}": v for k, v in med.items()},
+        scene=scene,
+        steps=rows[0]["steps"],
+        reps=reps,
+        log_bytes=os.path.getsize(log),
+        rows=rows,
+        **{f"median_{k}": v for k, v in med.items()},
         # time per step of the replay over time per step of the original run, its files'
         # finishing included (<= 1.2 required), per repetition (the two commands a few seconds
         # apart), then the median
-        time_ratio=statistics.median(r["run_with_finish_steps_per_s"] / r["replay_steps_per_s"]
-                                     for r in rows),
+        time_ratio=statistics.median(
+            r["run_with_finish_steps_per_s"] / r["replay_steps_per_s"] for r in rows
+        ),
         # the same against the run's loop alone (its files' finishing left out): stricter
-        loop_time_ratio=statistics.median(r["run_steps_per_s"] / r["replay_steps_per_s"]
-                                          for r in rows),
+        loop_time_ratio=statistics.median(
+            r["run_steps_per_s"] / r["replay_steps_per_s"] for r in rows
+        ),
         wall_time_ratio=statistics.median(r["replay_wall_s"] / r["run_wall_s"] for r in rows),
         # the same from the best repetition of each (least disturbed by other load)
         best_loop_time_ratio=max(r["run_steps_per_s"] for r in rows)

@@ -5,8 +5,8 @@ restitution, friction and `concrete` for static) plus what the benchmark needs t
 (how many steps to warm up and to time, which quality figure applies). Pyramids and piles are
 generator parameters, written as YAML text in the scene format and read with
 `isaac.scene.load_scene_text`; when the loader is missing (or refuses the text) the same
-parameters go straight to `isaac.scene.generators` and `Scene.source` says so. The three small scenes
-are written out body by body.
+parameters go straight to `isaac.scene.generators` and `Scene.source` says so. The three small
+scenes are written out body by body.
 
 All scenes: dt = 1/60 s, no sleeping in any engine, friction on except in the head-on case.
 """
@@ -72,21 +72,33 @@ def with_preset(scene: Scene, preset: str) -> Scene:
 
 # ---- scene definitions: generator parameters -> YAML text (loader) or the generator itself -----
 
+
 def _generator_yaml(name: str, steps: int, generator: str, params: dict) -> str:
     """The scene as YAML text in the scene format (docs/scene-format.md)."""
     import yaml
 
-    doc = dict(name=name,
-               world=dict(dt=DT, steps=steps, gravity=list(GRAVITY), friction=True),
-               generators=[{generator: params}])
+    doc = dict(
+        name=name,
+        world=dict(dt=DT, steps=steps, gravity=list(GRAVITY), friction=True),
+        generators=[{generator: params}],
+    )
     return yaml.safe_dump(doc, sort_keys=False, default_flow_style=None)
 
 
 def _pyramid_params(rows: int) -> dict:
     # a 5 cm gap between neighbours: Box2D keeps a 1 cm skin around each polygon, so boxes that
     # touch exactly would be pushed sideways in Box2D alone.
-    return dict(rows=rows, box=list(PYRAMID_BOX), base=[0.0, 0.0], spacing=0.05, ground=True,
-                density=1.0, friction=FRICTION, restitution=0.0, name="pyramid")
+    return dict(
+        rows=rows,
+        box=list(PYRAMID_BOX),
+        base=[0.0, 0.0],
+        spacing=0.05,
+        ground=True,
+        density=1.0,
+        friction=FRICTION,
+        restitution=0.0,
+        name="pyramid",
+    )
 
 
 def _expand_pyramid(rows: int, steps: int) -> Scene:
@@ -107,9 +119,17 @@ def _pile_params(count: int, seed: int) -> dict:
     with a deeper pile."""
     cell = 1.05 * 2.0 * PILE_RADIUS[1]  # the generator's cell side
     columns = max(10, math.ceil(count / PILE_ROWS))
-    return dict(count=count, seed=seed, sides=list(PILE_SIDES), radius=list(PILE_RADIUS),
-                container=dict(width=round(columns * cell + 0.01, 3), thickness=1.0),
-                density=1.0, friction=FRICTION, restitution=0.0, name="pile")
+    return dict(
+        count=count,
+        seed=seed,
+        sides=list(PILE_SIDES),
+        radius=list(PILE_RADIUS),
+        container=dict(width=round(columns * cell + 0.01, 3), thickness=1.0),
+        density=1.0,
+        friction=FRICTION,
+        restitution=0.0,
+        name="pile",
+    )
 
 
 def _expand_pile(count: int, seed: int, steps: int) -> Scene:
@@ -121,34 +141,53 @@ def _expand_pile(count: int, seed: int, steps: int) -> Scene:
     return Scene(name=f"pile-{count}", world=world(steps=steps), bodies=tuple(pile(**p)))
 
 
-def _body_doc(name: str, size: tuple[float, float], position, *, velocity=(0.0, 0.0),
-              density: float = 1.0, restitution: float = 0.0, friction: float = 0.0,
-              concrete: bool = False) -> dict:
-    return dict(name=name, shape=dict(box=list(size)), position=list(position),
-                velocity=list(velocity), density=density, restitution=restitution,
-                friction=friction, concrete=concrete)
+def _body_doc(
+    name: str,
+    size: tuple[float, float],
+    position,
+    *,
+    velocity=(0.0, 0.0),
+    density: float = 1.0,
+    restitution: float = 0.0,
+    friction: float = 0.0,
+    concrete: bool = False,
+) -> dict:
+    return dict(
+        name=name,
+        shape=dict(box=list(size)),
+        position=list(position),
+        velocity=list(velocity),
+        density=density,
+        restitution=restitution,
+        friction=friction,
+        concrete=concrete,
+    )
 
 
 def _head_on_doc(steps: int) -> dict:
     """Two equal 1 m boxes, restitution 1, no gravity, closing at 4 m/s: they exchange
     velocities."""
-    return dict(name="head-on",
-                world=dict(dt=DT, steps=steps, gravity=[0.0, 0.0], friction=False),
-                bodies=[_body_doc("a", (1.0, 1.0), (-3.0, 0.0), velocity=(3.0, 0.0),
-                                  restitution=1.0),
-                        _body_doc("b", (1.0, 1.0), (3.0, 0.0), velocity=(-1.0, 0.0),
-                                  restitution=1.0)])
+    return dict(
+        name="head-on",
+        world=dict(dt=DT, steps=steps, gravity=[0.0, 0.0], friction=False),
+        bodies=[
+            _body_doc("a", (1.0, 1.0), (-3.0, 0.0), velocity=(3.0, 0.0), restitution=1.0),
+            _body_doc("b", (1.0, 1.0), (3.0, 0.0), velocity=(-1.0, 0.0), restitution=1.0),
+        ],
+    )
 
 
 def _mass_ratio_doc(steps: int) -> dict:
     """A 1 m box 1000x denser resting on a light 1 m box on the ground."""
-    return dict(name="mass-ratio",
-                world=dict(dt=DT, steps=steps, gravity=list(GRAVITY), friction=True),
-                bodies=[_body_doc("ground", (20.0, 1.0), (0.0, -0.5), friction=FRICTION,
-                                  concrete=True),
-                        _body_doc("light", (1.0, 1.0), (0.0, 0.5), friction=FRICTION),
-                        _body_doc("heavy", (1.0, 1.0), (0.0, 1.5), density=1000.0,
-                                  friction=FRICTION)])
+    return dict(
+        name="mass-ratio",
+        world=dict(dt=DT, steps=steps, gravity=list(GRAVITY), friction=True),
+        bodies=[
+            _body_doc("ground", (20.0, 1.0), (0.0, -0.5), friction=FRICTION, concrete=True),
+            _body_doc("light", (1.0, 1.0), (0.0, 0.5), friction=FRICTION),
+            _body_doc("heavy", (1.0, 1.0), (0.0, 1.5), density=1000.0, friction=FRICTION),
+        ],
+    )
 
 
 TUNNEL_LANES = 10
@@ -164,24 +203,42 @@ def _tunneling_doc(steps: int) -> dict:
     for k in range(TUNNEL_LANES):
         y = 4.0 * k
         bodies.append(_body_doc(f"wall_{k}", (0.1, 2.0), (TUNNEL_WALL_X, y), concrete=True))
-        bodies.append(_body_doc(f"bullet_{k}", (0.2, 0.2), (-k * travel / TUNNEL_LANES, y),
-                                velocity=(TUNNEL_SPEED, 0.0)))
-    return dict(name="tunneling",
-                world=dict(dt=DT, steps=steps, gravity=[0.0, 0.0], friction=False),
-                bodies=bodies)
+        bodies.append(
+            _body_doc(
+                f"bullet_{k}",
+                (0.2, 0.2),
+                (-k * travel / TUNNEL_LANES, y),
+                velocity=(TUNNEL_SPEED, 0.0),
+            )
+        )
+    return dict(
+        name="tunneling",
+        world=dict(dt=DT, steps=steps, gravity=[0.0, 0.0], friction=False),
+        bodies=bodies,
+    )
 
 
 def _expand_doc(doc: dict) -> Scene:
     """The fallback for a scene written body by body (box shapes only)."""
     w = doc["world"]
     bodies = tuple(
-        BodySpec(name=b["name"], vertices=box(*b["shape"]["box"]), position=tuple(b["position"]),
-                 velocity=tuple(b["velocity"]), density=b["density"],
-                 restitution=b["restitution"], friction=b["friction"], concrete=b["concrete"])
-        for b in doc["bodies"])
-    return Scene(name=doc["name"], bodies=bodies,
-                 world=world(gravity=tuple(w["gravity"]), friction=w["friction"],
-                             steps=w["steps"]))
+        BodySpec(
+            name=b["name"],
+            vertices=box(*b["shape"]["box"]),
+            position=tuple(b["position"]),
+            velocity=tuple(b["velocity"]),
+            density=b["density"],
+            restitution=b["restitution"],
+            friction=b["friction"],
+            concrete=b["concrete"],
+        )
+        for b in doc["bodies"]
+    )
+    return Scene(
+        name=doc["name"],
+        bodies=bodies,
+        world=world(gravity=tuple(w["gravity"]), friction=w["friction"], steps=w["steps"]),
+    )
 
 
 def _doc_scene(doc: dict) -> Scene:
@@ -217,13 +274,17 @@ def _pyramid(rows: int) -> BenchScene:
     warm, timed = 60, 240
     steps = warm + timed
     text = _generator_yaml(f"pyramid-{rows}", steps, "pyramid", _pyramid_params(rows))
-    scene = _load_or_expand(text,
-                            lambda: _expand_pyramid(rows, steps))
+    scene = _load_or_expand(text, lambda: _expand_pyramid(rows, steps))
     dynamic = [k for k, b in enumerate(scene.bodies) if not b.concrete]
     top = max(dynamic, key=lambda k: scene.bodies[k].position[1])
-    return BenchScene(f"pyramid-{rows}", "pyramid", scene, warm, timed,
-                      info=dict(top=top, tolerance_m=0.5 * PYRAMID_BOX[1],
-                                angle_tolerance_rad=0.1))
+    return BenchScene(
+        f"pyramid-{rows}",
+        "pyramid",
+        scene,
+        warm,
+        timed,
+        info=dict(top=top, tolerance_m=0.5 * PYRAMID_BOX[1], angle_tolerance_rad=0.1),
+    )
 
 
 def _pile(count: int) -> BenchScene:
@@ -231,9 +292,10 @@ def _pile(count: int) -> BenchScene:
     # then the timed block; the 10,000 pile has fewer timed steps (budget: ~15 min in all)
     warm, timed = (120, 120) if count < 10000 else (120, 60)
     steps = warm + timed
-    scene = _load_or_expand(_generator_yaml(f"pile-{count}", steps, "pile",
-                                            _pile_params(count, PILE_SEED)),
-                            lambda: _expand_pile(count, PILE_SEED, steps))
+    scene = _load_or_expand(
+        _generator_yaml(f"pile-{count}", steps, "pile", _pile_params(count, PILE_SEED)),
+        lambda: _expand_pile(count, PILE_SEED, steps),
+    )
     return BenchScene(f"pile-{count}", "pile", scene, warm, timed)
 
 
@@ -247,13 +309,25 @@ def _index(scene: Scene, name: str) -> int:
 
 def _mass_ratio() -> BenchScene:
     scene = _doc_scene(_mass_ratio_doc(120))
-    return BenchScene("mass-ratio", "mass_ratio", scene, 10, 110,
-                      info=dict(heavy=_index(scene, "heavy"), light=_index(scene, "light")))
+    return BenchScene(
+        "mass-ratio",
+        "mass_ratio",
+        scene,
+        10,
+        110,
+        info=dict(heavy=_index(scene, "heavy"), light=_index(scene, "light")),
+    )
 
 
 def _tunneling() -> BenchScene:
-    return BenchScene("tunneling", "tunneling", _doc_scene(_tunneling_doc(60)), 10, 50,
-                      info=dict(wall_x=TUNNEL_WALL_X, lanes=TUNNEL_LANES))
+    return BenchScene(
+        "tunneling",
+        "tunneling",
+        _doc_scene(_tunneling_doc(60)),
+        10,
+        50,
+        info=dict(wall_x=TUNNEL_WALL_X, lanes=TUNNEL_LANES),
+    )
 
 
 BUILDERS = {

@@ -84,8 +84,9 @@ def run_worker(scene: str, engine: str, timeout: float) -> dict:
     """One (scene, engine) repetition in a fresh process; a failure becomes a row with `error`."""
     cmd = python_cmd("bench.worker", "--scene", scene, "--engine", engine)
     try:
-        proc = subprocess.run(cmd, capture_output=True, text=True, cwd=ROOT, env=subprocess_env(),
-                              timeout=timeout)
+        proc = subprocess.run(
+            cmd, capture_output=True, text=True, cwd=ROOT, env=subprocess_env(), timeout=timeout
+        )
     except subprocess.TimeoutExpired:
         return dict(scene=scene, engine=engine, error=f"timed out after {timeout:.0f} s")
     if proc.returncode != 0:
@@ -96,6 +97,7 @@ def run_worker(scene: str, engine: str, timeout: float) -> dict:
 
 # ---- aggregation ----------------------------------------------------------------------------
 
+
 def quality_text(q: dict | None) -> str:
     """One short phrase per scene kind, for the table."""
     if not q:
@@ -103,20 +105,28 @@ def quality_text(q: dict | None) -> str:
     bad = "" if q.get("finite", True) else "NON-FINITE; "
     if "standing" in q:
         state = "stands" if q["standing"] else "FALLS"
-        return (f"{bad}{state}: top drift {q['top_drift_m']:.3f} m; any box: sideways "
-                f"{q['max_sideways_m']:.2f} m, sink {q['max_sink_m']:.2f} m, turn "
-                f"{q['max_turn_rad']:.2f} rad; max overlap {q['max_overlap_m']:.3f} m")
+        return (
+            f"{bad}{state}: top drift {q['top_drift_m']:.3f} m; any box: sideways "
+            f"{q['max_sideways_m']:.2f} m, sink {q['max_sink_m']:.2f} m, turn "
+            f"{q['max_turn_rad']:.2f} rad; max overlap {q['max_overlap_m']:.3f} m"
+        )
     if "holds" in q:
         state = "holds" if q["holds"] else "FAILS"
-        return (f"{bad}{state}: heavy box dropped {q['heavy_drop_m']:.3f} m, "
-                f"max overlap {q['max_overlap_m']:.3f} m")
+        return (
+            f"{bad}{state}: heavy box dropped {q['heavy_drop_m']:.3f} m, "
+            f"max overlap {q['max_overlap_m']:.3f} m"
+        )
     if "max_overlap_m" in q:
-        return (f"{bad}max overlap {q['max_overlap_m']:.4f} m (p99 {q['p99_overlap_m']:.4f} m, "
-                f"{q['touching_pairs']} pairs)")
+        return (
+            f"{bad}max overlap {q['max_overlap_m']:.4f} m (p99 {q['p99_overlap_m']:.4f} m, "
+            f"{q['touching_pairs']} pairs)"
+        )
     if "exchange_error_mps" in q:
         v = q["final_velocities_x"]
-        return (f"{bad}exchange error {q['exchange_error_mps']:.2e} m/s "
-                f"(final vx {v[0]:.3f}, {v[1]:.3f}; expected -1, 3)")
+        return (
+            f"{bad}exchange error {q['exchange_error_mps']:.2e} m/s "
+            f"(final vx {v[0]:.3f}, {v[1]:.3f}; expected -1, 3)"
+        )
     if "stopped" in q:
         return f"{bad}stopped {q['stopped']}/{q['lanes']} bullets at 200 m/s"
     return bad + json.dumps(q)
@@ -143,17 +153,29 @@ def aggregate(runs: list[dict], scenes: list[str], engines: list[str]) -> list[d
             base_ms = {b["rep"]: b["ms_per_step"] for b in base if "error" not in b}
             ratios = [r["ms_per_step"] / base_ms[r["rep"]] for r in ok if r["rep"] in base_ms]
             first = ok[0]
-            rows.append(dict(
-                kind="row", scene=scene, engine=first["engine"], engine_arg=engine,
-                settings=first["settings"], n_bodies=first["n_bodies"], reps=len(ok),
-                ms_per_step=statistics.median(ms), ms_per_step_min=min(ms),
-                ms_per_step_max=max(ms), steps_per_s=1000.0 / statistics.median(ms),
-                ratio_to_pymunk=statistics.median(ratios) if ratios else None,
-                memory_per_body_bytes=statistics.median(r["memory_per_body_bytes"] for r in ok),
-                timed_steps=first["timed_steps"], warmup_steps=first["warmup_steps"],
-                quality=first["quality"], quality_text=quality_text(first["quality"]),
-                quality_varies=any(r["quality"] != first["quality"] for r in ok),
-                scene_source=first.get("scene_source")))
+            rows.append(
+                dict(
+                    kind="row",
+                    scene=scene,
+                    engine=first["engine"],
+                    engine_arg=engine,
+                    settings=first["settings"],
+                    n_bodies=first["n_bodies"],
+                    reps=len(ok),
+                    ms_per_step=statistics.median(ms),
+                    ms_per_step_min=min(ms),
+                    ms_per_step_max=max(ms),
+                    steps_per_s=1000.0 / statistics.median(ms),
+                    ratio_to_pymunk=statistics.median(ratios) if ratios else None,
+                    memory_per_body_bytes=statistics.median(r["memory_per_body_bytes"] for r in ok),
+                    timed_steps=first["timed_steps"],
+                    warmup_steps=first["warmup_steps"],
+                    quality=first["quality"],
+                    quality_text=quality_text(first["quality"]),
+                    quality_varies=any(r["quality"] != first["quality"] for r in ok),
+                    scene_source=first.get("scene_source"),
+                )
+            )
     return rows
 
 
@@ -162,15 +184,24 @@ def growth(rows: list[dict]) -> list[dict]:
     out = []
     engines = sorted({r["engine_arg"] for r in rows if "error" not in r})
     for engine in engines:
-        pts = [(r["n_bodies"], r["ms_per_step"]) for r in rows
-               if r.get("engine_arg") == engine and r["scene"] in GROWTH_SCENES
-               and "error" not in r]
+        pts = [
+            (r["n_bodies"], r["ms_per_step"])
+            for r in rows
+            if r.get("engine_arg") == engine and r["scene"] in GROWTH_SCENES and "error" not in r
+        ]
         if len(pts) < 2:
             continue
         n, ms = np.log([p[0] for p in pts]), np.log([p[1] for p in pts])
         slope, intercept = np.polyfit(n, ms, 1)
-        out.append(dict(kind="growth", engine=engine, exponent=float(slope),
-                        bodies=[p[0] for p in pts], ms_per_step=[p[1] for p in pts]))
+        out.append(
+            dict(
+                kind="growth",
+                engine=engine,
+                exponent=float(slope),
+                bodies=[p[0] for p in pts],
+                ms_per_step=[p[1] for p in pts],
+            )
+        )
     return out
 
 
@@ -195,8 +226,14 @@ def startup(engines: list[str], reps: int) -> list[dict]:
 
         def once(env: dict[str, str], code: str = code) -> float:
             t0 = time.perf_counter()
-            proc = subprocess.run([sys.executable, "-c", code], cwd=ROOT, env=env,
-                                  capture_output=True, text=True, timeout=600)
+            proc = subprocess.run(
+                [sys.executable, "-c", code],
+                cwd=ROOT,
+                env=env,
+                capture_output=True,
+                text=True,
+                timeout=600,
+            )
             elapsed = time.perf_counter() - t0
             if proc.returncode != 0:
                 raise RuntimeError((proc.stderr or "").strip().splitlines()[-1:])
@@ -207,10 +244,17 @@ def startup(engines: list[str], reps: int) -> list[dict]:
                 env = subprocess_env(NUMBA_CACHE_DIR=cache)
                 first = once(env) if engine.startswith("isaac") else None
                 cached = [once(env) for _ in range(reps)]
-            out.append(dict(kind="startup", engine=engine, first_run_s=first,
-                            cached_s=statistics.median(cached), cached_runs_s=cached,
-                            what="python -c: import, build pyramid-10, first step "
-                                 "(whole process, interpreter start-up included)"))
+            out.append(
+                dict(
+                    kind="startup",
+                    engine=engine,
+                    first_run_s=first,
+                    cached_s=statistics.median(cached),
+                    cached_runs_s=cached,
+                    what="python -c: import, build pyramid-10, first step "
+                    "(whole process, interpreter start-up included)",
+                )
+            )
         except Exception as exc:  # noqa: BLE001 - report, go on
             out.append(dict(kind="startup", engine=engine, error=str(exc)))
         log(f"  startup {engine}: {out[-1]}")
@@ -225,10 +269,22 @@ RECORDING_SCENES = (("pile-500", 400), ("pile-2000", 200))
 
 def recording(preset: str, reps: int, steps: int, scene: str) -> dict:
     with tempfile.TemporaryDirectory(prefix="isaac-bench-rec-") as tmp:
-        cmd = python_cmd("bench.recording", "--scene", scene, "--preset", preset,
-                         "--out", tmp, "--reps", str(reps), "--steps", str(steps))
-        proc = subprocess.run(cmd, capture_output=True, text=True, cwd=ROOT,
-                              env=subprocess_env(), timeout=900)
+        cmd = python_cmd(
+            "bench.recording",
+            "--scene",
+            scene,
+            "--preset",
+            preset,
+            "--out",
+            tmp,
+            "--reps",
+            str(reps),
+            "--steps",
+            str(steps),
+        )
+        proc = subprocess.run(
+            cmd, capture_output=True, text=True, cwd=ROOT, env=subprocess_env(), timeout=900
+        )
     if proc.returncode != 0:
         tail = (proc.stderr or "").strip().splitlines()[-1:] or [f"exit {proc.returncode}"]
         return dict(kind="recording", engine=f"isaac-{preset}", scene=scene, error=tail[0])
@@ -237,15 +293,21 @@ def recording(preset: str, reps: int, steps: int, scene: str) -> dict:
 
 # ---- targets --------------------------------------------------------------------------------
 
-def check_targets(rows, growth_rows, startup_rows, isaac_engines,
-                  recordings=()) -> list[dict]:
+
+def check_targets(rows, growth_rows, startup_rows, isaac_engines, recordings=()) -> list[dict]:
     out = []
     for engine in isaac_engines:
         for what, scene, limit in TARGETS:
             value = None
             if what == "ratio":
-                value = next((r.get("ratio_to_pymunk") for r in rows
-                              if r.get("engine_arg") == engine and r["scene"] == scene), None)
+                value = next(
+                    (
+                        r.get("ratio_to_pymunk")
+                        for r in rows
+                        if r.get("engine_arg") == engine and r["scene"] == scene
+                    ),
+                    None,
+                )
                 label = f"ms/step {engine}/pymunk, {scene}"
             elif what == "growth":
                 value = next((g["exponent"] for g in growth_rows if g["engine"] == engine), None)
@@ -253,26 +315,57 @@ def check_targets(rows, growth_rows, startup_rows, isaac_engines,
             else:
                 key = "cached_s" if what == "startup_cached_s" else "first_run_s"
                 value = next((s.get(key) for s in startup_rows if s["engine"] == engine), None)
-                label = ("cached start-up to first step (s)" if key == "cached_s"
-                         else "first-run compile, start-up to first step (s)")
-            out.append(dict(kind="target", engine=engine, what=label, limit=limit, value=value,
-                            met=None if value is None else bool(value <= limit)))
+                label = (
+                    "cached start-up to first step (s)"
+                    if key == "cached_s"
+                    else "first-run compile, start-up to first step (s)"
+                )
+            out.append(
+                dict(
+                    kind="target",
+                    engine=engine,
+                    what=label,
+                    limit=limit,
+                    value=value,
+                    met=None if value is None else bool(value <= limit),
+                )
+            )
     for rec in recordings:
         if "error" in rec:
             continue
         frac = rec.get("overhead_fraction", {})
-        checks = [(f"{mode.upper() if mode == 'mcap' else 'Rerun'} recording overhead, "
-                   f"{rec['scene']} (fraction)", limit, frac.get(mode))
-                  for mode, limit in RECORDING_TARGETS]
-        checks.append((f"replay time / original run's (isaac run --mcap), {rec['scene']}",
-                       REPLAY_TARGET, rec.get("replay", {}).get("time_ratio")))
+        checks = [
+            (
+                f"{mode.upper() if mode == 'mcap' else 'Rerun'} recording overhead, "
+                f"{rec['scene']} (fraction)",
+                limit,
+                frac.get(mode),
+            )
+            for mode, limit in RECORDING_TARGETS
+        ]
+        checks.append(
+            (
+                f"replay time / original run's (isaac run --mcap), {rec['scene']}",
+                REPLAY_TARGET,
+                rec.get("replay", {}).get("time_ratio"),
+            )
+        )
         for label, limit, value in checks:
-            out.append(dict(kind="target", engine=rec["engine"], what=label, limit=limit,
-                            value=value, met=None if value is None else bool(value <= limit)))
+            out.append(
+                dict(
+                    kind="target",
+                    engine=rec["engine"],
+                    what=label,
+                    limit=limit,
+                    value=value,
+                    met=None if value is None else bool(value <= limit),
+                )
+            )
     return out
 
 
 # ---- output ---------------------------------------------------------------------------------
+
 
 def fmt(x, digits: int = 3) -> str:
     if x is None:
@@ -283,16 +376,21 @@ def fmt(x, digits: int = 3) -> str:
 
 
 def markdown(meta, rows, growth_rows, startup_rows, recs, targets) -> str:
-    lines = [f"Benchmark of {meta['date_utc']} on {meta['machine']} ({meta['cpus']} CPUs), "
-             f"Python {meta['python']}, {meta['versions']}; git {meta['git']}. "
-             f"dt = 1/60 s, no sleeping, friction on (except head-on and tunneling); "
-             f"{meta['reps']} repetitions per engine, interleaved, each in its own process; "
-             "medians. Ratio = median over repetitions of (engine / pymunk) from the same "
-             "repetition. Memory per body = (RSS after build and warm-up - RSS before build) / "
-             "bodies.", ""]
-    lines += ["| scene | bodies | engine | settings | ms/step | steps/s | ratio to pymunk | "
-              "memory/body | quality |",
-              "|---|---|---|---|---|---|---|---|---|"]
+    lines = [
+        f"Benchmark of {meta['date_utc']} on {meta['machine']} ({meta['cpus']} CPUs), "
+        f"Python {meta['python']}, {meta['versions']}; git {meta['git']}. "
+        f"dt = 1/60 s, no sleeping, friction on (except head-on and tunneling); "
+        f"{meta['reps']} repetitions per engine, interleaved, each in its own process; "
+        "medians. Ratio = median over repetitions of (engine / pymunk) from the same "
+        "repetition. Memory per body = (RSS after build and warm-up - RSS before build) / "
+        "bodies.",
+        "",
+    ]
+    lines += [
+        "| scene | bodies | engine | settings | ms/step | steps/s | ratio to pymunk | "
+        "memory/body | quality |",
+        "|---|---|---|---|---|---|---|---|---|",
+    ]
     for r in rows:
         if "error" in r:
             lines.append(f"| {r['scene']} | | {r['engine']} | | error: {r['error']} | | | | |")
@@ -303,37 +401,54 @@ def markdown(meta, rows, growth_rows, startup_rows, recs, targets) -> str:
         lines.append(
             f"| {r['scene']} | {r['n_bodies']} | {r['engine']} | {r['settings']} | "
             f"{fmt(r['ms_per_step'])}{spread} | {r['steps_per_s']:.0f} | "
-            f"{fmt(r['ratio_to_pymunk'])} | {mem_text} | {r['quality_text']} |")
+            f"{fmt(r['ratio_to_pymunk'])} | {mem_text} | {r['quality_text']} |"
+        )
     steps = {}
     for r in rows:
         steps.setdefault((r.get("warmup_steps"), r.get("timed_steps")), []).append(r["scene"])
-    steps_text = "; ".join(f"{', '.join(dict.fromkeys(names))}: {w} + {t}"
-                           for (w, t), names in steps.items() if w is not None)
-    lines += ["", f"Steps (warm-up + timed): {steps_text}. ms/step is the timed block's mean; "
-              "quality is measured on the final poses. Pile overlap is "
-              "the deepest SAT penetration over all touching pairs (bench/quality.py, the same "
-              "code for every engine); Box2D rests polygons on a 1 cm skin, so it shows little "
-              "overlap. A pyramid stands while no box has moved half a box sideways or down nor "
-              "turned 0.1 rad. Memory per body is shown from 500 bodies up (page-size noise "
-              "below).", ""]
+    steps_text = "; ".join(
+        f"{', '.join(dict.fromkeys(names))}: {w} + {t}"
+        for (w, t), names in steps.items()
+        if w is not None
+    )
+    lines += [
+        "",
+        f"Steps (warm-up + timed): {steps_text}. ms/step is the timed block's mean; "
+        "quality is measured on the final poses. Pile overlap is "
+        "the deepest SAT penetration over all touching pairs (bench/quality.py, the same "
+        "code for every engine); Box2D rests polygons on a 1 cm skin, so it shows little "
+        "overlap. A pyramid stands while no box has moved half a box sideways or down nor "
+        "turned 0.1 rad. Memory per body is shown from 500 bodies up (page-size noise "
+        "below).",
+        "",
+    ]
     if growth_rows:
-        lines += ["| engine | growth exponent (ms/step vs bodies, piles) | points |",
-                  "|---|---|---|"]
+        lines += [
+            "| engine | growth exponent (ms/step vs bodies, piles) | points |",
+            "|---|---|---|",
+        ]
         for g in growth_rows:
-            pts = ", ".join(f"{n}: {fmt(m)}"
-                            for n, m in zip(g["bodies"], g["ms_per_step"], strict=True))
+            pts = ", ".join(
+                f"{n}: {fmt(m)}" for n, m in zip(g["bodies"], g["ms_per_step"], strict=True)
+            )
             lines.append(f"| {g['engine']} | {g['exponent']:.3f} | {pts} |")
         lines.append("")
     if startup_rows:
-        lines += ["| engine | first run (compile), s | cached start-up to first step, s |",
-                  "|---|---|---|"]
+        lines += [
+            "| engine | first run (compile), s | cached start-up to first step, s |",
+            "|---|---|---|",
+        ]
         for s in startup_rows:
             if "error" in s:
                 lines.append(f"| {s['engine']} | error: {s['error']} | |")
             else:
                 lines.append(f"| {s['engine']} | {fmt(s['first_run_s'])} | {fmt(s['cached_s'])} |")
-        lines += ["", "Start-up: whole `python -c` process (import, build pyramid-10, first step); "
-                  "first run with an empty NUMBA_CACHE_DIR.", ""]
+        lines += [
+            "",
+            "Start-up: whole `python -c` process (import, build pyramid-10, first step); "
+            "first run with an empty NUMBA_CACHE_DIR.",
+            "",
+        ]
     for rec in recs:
         if "error" in rec:
             lines += [f"Recording ({rec.get('scene')}): error: {rec['error']}", ""]
@@ -342,29 +457,37 @@ def markdown(meta, rows, growth_rows, startup_rows, recs, targets) -> str:
             over = rec.get("overhead_ms_per_step", {})
             frac = rec.get("overhead_fraction", {})
             opened, closed = rec.get("open_s", {}), rec.get("close_s", {})
-            lines += [f"Recording overhead, {rec['engine']} on {rec['scene']} ({rec['steps']} "
-                      "steps; each mode's repetition against the plain run interleaved with it, "
-                      "median; targets: MCAP <= 25 %, Rerun <= 50 % on top of the simulation "
-                      "alone). ms/step is the steady cost (steps, writes, and the wait until the "
-                      "writers have taken every step); opening and closing the files are one-off "
-                      "costs, shown apart:", "",
-                      "| mode | ms/step | steps/s | overhead ms/step | overhead | bytes/step "
-                      "| bytes/body-step | open, s | close, s |",
-                      "|---|---|---|---|---|---|---|---|---|"]
+            lines += [
+                f"Recording overhead, {rec['engine']} on {rec['scene']} ({rec['steps']} "
+                "steps; each mode's repetition against the plain run interleaved with it, "
+                "median; targets: MCAP <= 25 %, Rerun <= 50 % on top of the simulation "
+                "alone). ms/step is the steady cost (steps, writes, and the wait until the "
+                "writers have taken every step); opening and closing the files are one-off "
+                "costs, shown apart:",
+                "",
+                "| mode | ms/step | steps/s | overhead ms/step | overhead | bytes/step "
+                "| bytes/body-step | open, s | close, s |",
+                "|---|---|---|---|---|---|---|---|---|",
+            ]
             for mode, v in ms.items():
                 size = rec.get(f"{mode}_bytes_per_step")
                 extra = over.get(mode)
                 share = f"{100 * frac[mode]:.0f} %" if mode in frac else "–"
                 rate = f"{1000 / v:.0f}" if v else "–"
                 per_body = size / rec["bodies"] if size and rec.get("bodies") else None
-                lines.append(f"| {mode} | {fmt(v)} | {rate} | {fmt(extra)} | {share} | "
-                             f"{fmt(size) if size else '–'} | {fmt(per_body)} | "
-                             f"{fmt(opened.get(mode))} | "
-                             f"{fmt(closed.get(mode))} |")
+                lines.append(
+                    f"| {mode} | {fmt(v)} | {rate} | {fmt(extra)} | {share} | "
+                    f"{fmt(size) if size else '–'} | {fmt(per_body)} | "
+                    f"{fmt(opened.get(mode))} | "
+                    f"{fmt(closed.get(mode))} |"
+                )
             rp = rec.get("replay", {})
             if "time_ratio" in rp:
-                plain = (f"; {rp['time_ratio_to_plain']:.2f}x the plain simulation's ms/step "
-                         "above" if rp.get("time_ratio_to_plain") else "")
+                plain = (
+                    f"; {rp['time_ratio_to_plain']:.2f}x the plain simulation's ms/step above"
+                    if rp.get("time_ratio_to_plain")
+                    else ""
+                )
                 lines.append(
                     f"\nReplay ({rp['command']}; medians): run "
                     f"{rp['median_run_with_finish_steps_per_s']:.0f} steps/s with its files "
@@ -373,7 +496,8 @@ def markdown(meta, rows, growth_rows, startup_rows, recs, targets) -> str:
                     f"{rp['median_replay_steps_per_s']:.0f} steps/s (loop rates after the first "
                     f"step): replay time per step {rp['time_ratio']:.2f}x the original run's "
                     f"(target <= {REPLAY_TARGET}; {rp['loop_time_ratio']:.2f}x its loop alone), "
-                    f"whole process {rp['wall_time_ratio']:.2f}x{plain}; identical.")
+                    f"whole process {rp['wall_time_ratio']:.2f}x{plain}; identical."
+                )
             elif rp.get("note"):
                 lines.append(f"\n{rp['note']}")
             for note in rec.get("notes", []):
@@ -383,8 +507,9 @@ def markdown(meta, rows, growth_rows, startup_rows, recs, targets) -> str:
         lines += ["| target | engine | limit | measured | met |", "|---|---|---|---|---|"]
         for t in targets:
             met = "–" if t["met"] is None else ("yes" if t["met"] else "**no**")
-            lines.append(f"| {t['what']} | {t['engine']} | <= {t['limit']} | {fmt(t['value'])} | "
-                         f"{met} |")
+            lines.append(
+                f"| {t['what']} | {t['engine']} | <= {t['limit']} | {fmt(t['value'])} | {met} |"
+            )
         lines.append("")
     if meta.get("skipped"):
         lines += [f"Skipped: {s}" for s in meta["skipped"]] + [""]
@@ -413,49 +538,81 @@ def meta_info(reps: int, skipped: list[str]) -> dict:
         except PackageNotFoundError:
             pass
     try:
-        git = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=ROOT, check=False,
-                             capture_output=True, text=True).stdout.strip() or "?"
-        dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"],
-                               cwd=ROOT, check=False, capture_output=True, text=True).stdout
+        git = (
+            subprocess.run(
+                ["git", "rev-parse", "--short", "HEAD"],
+                cwd=ROOT,
+                check=False,
+                capture_output=True,
+                text=True,
+            ).stdout.strip()
+            or "?"
+        )
+        dirty = subprocess.run(
+            ["git", "status", "--porcelain", "--untracked-files=no"],
+            cwd=ROOT,
+            check=False,
+            capture_output=True,
+            text=True,
+        ).stdout
         if dirty.strip():
             git += " + uncommitted changes"
     except OSError:
         git = "?"
-    return dict(kind="meta",
-                date_utc=_dt.datetime.now(_dt.UTC).strftime("%Y-%m-%d %H:%M UTC"),
-                machine=f"{platform.machine()} {platform.processor() or platform.system()}",
-                cpus=os.cpu_count(), python=platform.python_version(),
-                versions=", ".join(versions), git=git, reps=reps, skipped=skipped)
+    return dict(
+        kind="meta",
+        date_utc=_dt.datetime.now(_dt.UTC).strftime("%Y-%m-%d %H:%M UTC"),
+        machine=f"{platform.machine()} {platform.processor() or platform.system()}",
+        cpus=os.cpu_count(),
+        python=platform.python_version(),
+        versions=", ".join(versions),
+        git=git,
+        reps=reps,
+        skipped=skipped,
+    )
 
 
 # ---- main -----------------------------------------------------------------------------------
 
+
 def parse_args(argv):
     p = argparse.ArgumentParser(prog="python -m bench", description=__doc__.split("\n")[0])
-    p.add_argument("--quick", action="store_true",
-                   help=f"a fast subset: {', '.join(QUICK_SCENES)}; 2 repetitions; no extras")
+    p.add_argument(
+        "--quick",
+        action="store_true",
+        help=f"a fast subset: {', '.join(QUICK_SCENES)}; 2 repetitions; no extras",
+    )
     p.add_argument("--scenes", help=f"comma-separated, from: {', '.join(ALL_SCENES)}")
     p.add_argument("--engines", help="comma-separated: pymunk, box2d, isaac (default: all three)")
-    p.add_argument("--presets", default=",".join(DEFAULT_PRESETS),
-                   help="ISAAC presets, one row each (default: %(default)s)")
+    p.add_argument(
+        "--presets",
+        default=",".join(DEFAULT_PRESETS),
+        help="ISAAC presets, one row each (default: %(default)s)",
+    )
     p.add_argument("--reps", type=int, help="repetitions per engine (default 5, quick 2)")
     p.add_argument("--no-startup", action="store_true", help="skip compile / start-up timing")
     p.add_argument("--no-recording", action="store_true", help="skip recording and replay")
     p.add_argument("--out", default=str(RESULTS), help="results directory (default: %(default)s)")
-    p.add_argument("--no-readme", action="store_true",
-                   help="do not write the tables into README.md between the bench markers")
+    p.add_argument(
+        "--no-readme",
+        action="store_true",
+        help="do not write the tables into README.md between the bench markers",
+    )
     p.add_argument("--timeout", type=float, default=600.0, help="per-process limit (s)")
     return p.parse_args(argv)
 
 
 def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
-    scenes = args.scenes.split(",") if args.scenes else list(
-        QUICK_SCENES if args.quick else ALL_SCENES)
+    scenes = (
+        args.scenes.split(",") if args.scenes else list(QUICK_SCENES if args.quick else ALL_SCENES)
+    )
     unknown = [s for s in scenes if s not in ALL_SCENES]
     if unknown:
-        print(f"bench: unknown scene(s) {', '.join(unknown)}; known: {', '.join(ALL_SCENES)}",
-              file=sys.stderr)
+        print(
+            f"bench: unknown scene(s) {', '.join(unknown)}; known: {', '.join(ALL_SCENES)}",
+            file=sys.stderr,
+        )
         return 2
     reps = args.reps or (2 if args.quick else 5)
     wanted = args.engines.split(",") if args.engines else [*PEERS, "isaac"]
@@ -486,8 +643,10 @@ def main(argv: list[str] | None = None) -> int:
                 r.update(kind="run", rep=rep, engine_arg=engine)
                 runs.append(r)
                 ms = r.get("ms_per_step")
-                log(f"  {scene:12s} rep {rep} {engine:15s} "
-                    + (f"{ms:9.4f} ms/step" if ms is not None else f"error: {r['error']}"))
+                log(
+                    f"  {scene:12s} rep {rep} {engine:15s} "
+                    + (f"{ms:9.4f} ms/step" if ms is not None else f"error: {r['error']}")
+                )
     rows = aggregate(runs, scenes, engines)
     growth_rows = growth(rows)
 
@@ -509,21 +668,29 @@ def main(argv: list[str] | None = None) -> int:
     text = markdown(meta, rows, growth_rows, startup_rows, recs, targets)
 
     # only a full run replaces the published results; a subset goes to partial.*
-    full = not (args.quick or args.scenes or args.engines or args.reps or args.no_startup
-                or args.no_recording or args.presets != ",".join(DEFAULT_PRESETS))
+    full = not (
+        args.quick
+        or args.scenes
+        or args.engines
+        or args.reps
+        or args.no_startup
+        or args.no_recording
+        or args.presets != ",".join(DEFAULT_PRESETS)
+    )
     stem = "latest" if full else "partial"
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     with open(out / f"{stem}.jsonl", "w") as f:
-        for obj in [meta, *runs, *rows, *growth_rows, *startup_rows,
-                    *recs, *targets]:
+        for obj in [meta, *runs, *rows, *growth_rows, *startup_rows, *recs, *targets]:
             f.write(json.dumps(obj, default=_json_default) + "\n")
     (out / f"{stem}.md").write_text(text + "\n")
     print(text)
     if full and not args.no_readme and update_readme(text, ROOT / "README.md"):
         log("bench: README.md table updated")
-    log(f"bench: {meta['elapsed_s']:.0f} s; wrote {out / (stem + '.jsonl')} and "
-        f"{out / (stem + '.md')}")
+    log(
+        f"bench: {meta['elapsed_s']:.0f} s; wrote {out / (stem + '.jsonl')} and "
+        f"{out / (stem + '.md')}"
+    )
     return 0
 
 

@@ -53,10 +53,18 @@ def measure_quality(bench: BenchScene, polys: LocalPolygons, start: tuple, engin
     pos, ang = engine.poses()
     q: dict = {}
     if bench.kind == "pyramid":
-        q.update(quality.pyramid_quality(start[0], pos, start[1], ang, ~polys.concrete,
-                                         bench.info["top"],
-                                         tolerance=bench.info["tolerance_m"],
-                                         angle_tolerance=bench.info["angle_tolerance_rad"]))
+        q.update(
+            quality.pyramid_quality(
+                start[0],
+                pos,
+                start[1],
+                ang,
+                ~polys.concrete,
+                bench.info["top"],
+                tolerance=bench.info["tolerance_m"],
+                angle_tolerance=bench.info["angle_tolerance_rad"],
+            )
+        )
         q.update(quality.overlap_stats(polys, pos, ang))
     elif bench.kind == "pile":
         q.update(quality.overlap_stats(polys, pos, ang))
@@ -106,10 +114,16 @@ def run(scene_name: str, engine_name: str) -> dict:
     ms = 1000.0 * elapsed / bench.timed_steps
 
     return dict(
-        scene=scene_name, engine=engine.name, settings=engine.settings,
-        n_bodies=n, n_dynamic=bench.n_dynamic, dt=bench.scene.world.dt,
-        warmup_steps=bench.warmup_steps, timed_steps=bench.timed_steps,
-        ms_per_step=ms, build_s=build_s,
+        scene=scene_name,
+        engine=engine.name,
+        settings=engine.settings,
+        n_bodies=n,
+        n_dynamic=bench.n_dynamic,
+        dt=bench.scene.world.dt,
+        warmup_steps=bench.warmup_steps,
+        timed_steps=bench.timed_steps,
+        ms_per_step=ms,
+        build_s=build_s,
         memory_per_body_bytes=(rss_warm - rss0) / n,
         memory_built_per_body_bytes=(rss_built - rss0) / n,
         peak_rss_bytes=resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024,

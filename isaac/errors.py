@@ -20,8 +20,9 @@ class SceneError(IsaacError):
     The message is one line: ``FILE:LINE: KEY.PATH: what is wrong`` (the line where YAML gives one).
     """
 
-    def __init__(self, what: str, *, source: str = "<scene>", line: int | None = None,
-                 path: str = "") -> None:
+    def __init__(
+        self, what: str, *, source: str = "<scene>", line: int | None = None, path: str = ""
+    ) -> None:
         self.what = what
         self.source = source
         self.line = line

@@ -26,31 +26,44 @@ _F = descriptor_pb2.FieldDescriptorProto
 
 _MESSAGES = {
     "Vector3": [("x", 1, "double"), ("y", 2, "double"), ("z", 3, "double")],
-    "Quaternion": [("x", 1, "double"), ("y", 2, "double"), ("z", 3, "double"),
-                   ("w", 4, "double")],
+    "Quaternion": [("x", 1, "double"), ("y", 2, "double"), ("z", 3, "double"), ("w", 4, "double")],
     "Point3": [("x", 1, "double"), ("y", 2, "double"), ("z", 3, "double")],
     "Color": [("r", 1, "double"), ("g", 2, "double"), ("b", 3, "double"), ("a", 4, "double")],
     "Pose": [("position", 1, ".foxglove.Vector3"), ("orientation", 2, ".foxglove.Quaternion")],
-    "LinePrimitive": [("type", 1, "enum:.foxglove.LinePrimitive.Type"),
-                      ("pose", 2, ".foxglove.Pose"), ("thickness", 3, "double"),
-                      ("scale_invariant", 4, "bool"), ("points", 5, "*.foxglove.Point3"),
-                      ("color", 6, ".foxglove.Color"), ("colors", 7, "*.foxglove.Color"),
-                      ("indices", 8, "*fixed32")],
-    "SceneEntity": [("timestamp", 1, ".google.protobuf.Timestamp"), ("frame_id", 2, "string"),
-                    ("id", 3, "string"), ("frame_locked", 5, "bool"),
-                    ("lines", 11, "*.foxglove.LinePrimitive")],
+    "LinePrimitive": [
+        ("type", 1, "enum:.foxglove.LinePrimitive.Type"),
+        ("pose", 2, ".foxglove.Pose"),
+        ("thickness", 3, "double"),
+        ("scale_invariant", 4, "bool"),
+        ("points", 5, "*.foxglove.Point3"),
+        ("color", 6, ".foxglove.Color"),
+        ("colors", 7, "*.foxglove.Color"),
+        ("indices", 8, "*fixed32"),
+    ],
+    "SceneEntity": [
+        ("timestamp", 1, ".google.protobuf.Timestamp"),
+        ("frame_id", 2, "string"),
+        ("id", 3, "string"),
+        ("frame_locked", 5, "bool"),
+        ("lines", 11, "*.foxglove.LinePrimitive"),
+    ],
     "SceneUpdate": [("entities", 2, "*.foxglove.SceneEntity")],
 }
-_SCALAR = {"double": _F.TYPE_DOUBLE, "bool": _F.TYPE_BOOL, "string": _F.TYPE_STRING,
-           "fixed32": _F.TYPE_FIXED32}
+_SCALAR = {
+    "double": _F.TYPE_DOUBLE,
+    "bool": _F.TYPE_BOOL,
+    "string": _F.TYPE_STRING,
+    "fixed32": _F.TYPE_FIXED32,
+}
 
 
 def descriptor_set_bytes() -> bytes:
     """Serialized FileDescriptorSet: google/protobuf/timestamp.proto + the foxglove messages."""
     ts = descriptor_pb2.FileDescriptorProto()
     timestamp_pb2.DESCRIPTOR.CopyToProto(ts)
-    fd = descriptor_pb2.FileDescriptorProto(name="foxglove/SceneUpdate.proto", package="foxglove",
-                                            syntax="proto3")
+    fd = descriptor_pb2.FileDescriptorProto(
+        name="foxglove/SceneUpdate.proto", package="foxglove", syntax="proto3"
+    )
     fd.dependency.append(ts.name)
     for name, fields in _MESSAGES.items():
         m = fd.message_type.add(name=name)
@@ -75,8 +88,18 @@ def descriptor_set_bytes() -> bytes:
 
 
 # one Point3 as a length-delimited field 5 of LinePrimitive: tag, length 27, then x, y, z doubles
-_POINT = np.dtype([("tag", "u1"), ("len", "u1"), ("tx", "u1"), ("x", "<f8"), ("ty", "u1"),
-                   ("y", "<f8"), ("tz", "u1"), ("z", "<f8")])
+_POINT = np.dtype(
+    [
+        ("tag", "u1"),
+        ("len", "u1"),
+        ("tx", "u1"),
+        ("x", "<f8"),
+        ("ty", "u1"),
+        ("y", "<f8"),
+        ("tz", "u1"),
+        ("z", "<f8"),
+    ]
+)
 assert _POINT.itemsize == 29
 
 
@@ -93,9 +116,11 @@ def _msg(number: int, *parts: bytes) -> bytes:
     return S.enc_bytes(number, b"".join(parts))
 
 
-_POSE = _msg(2, _msg(1, S.enc_double(1, 0.0), S.enc_double(2, 0.0), S.enc_double(3, 0.0)),
-             _msg(2, S.enc_double(1, 0.0), S.enc_double(2, 0.0), S.enc_double(3, 0.0),
-                  S.enc_double(4, 1.0)))
+_POSE = _msg(
+    2,
+    _msg(1, S.enc_double(1, 0.0), S.enc_double(2, 0.0), S.enc_double(3, 0.0)),
+    _msg(2, S.enc_double(1, 0.0), S.enc_double(2, 0.0), S.enc_double(3, 0.0), S.enc_double(4, 1.0)),
+)
 
 
 def _color(rgba) -> bytes:
@@ -104,8 +129,15 @@ def _color(rgba) -> bytes:
 
 def _line_list(segments: np.ndarray, rgba, thickness: float) -> bytes:
     """A LINE_LIST LinePrimitive (field 11 of SceneEntity) from (k, 2, 2) segments."""
-    return _msg(11, S.enc_uint(1, 2), _POSE, S.enc_double(3, thickness), S.enc_uint(4, 1),
-                _points(segments.reshape(-1, 2)), _color(rgba))
+    return _msg(
+        11,
+        S.enc_uint(1, 2),
+        _POSE,
+        S.enc_double(3, thickness),
+        S.enc_uint(4, 1),
+        _points(segments.reshape(-1, 2)),
+        _color(rgba),
+    )
 
 
 def _entity(t_ns: int, entity_id: str, *lines: bytes) -> bytes:
@@ -149,7 +181,10 @@ class SceneEncoder:
         p, n = con.point, con.normal
         normals = np.stack([p, p + n * self.normal_length], axis=1)
         impulses = np.stack([p, p + n * (con.impulse * self.impulse_scale)[:, None]], axis=1)
-        contacts = _entity(t_ns, "contacts",
-                           _line_list(normals, (0.95, 0.8, 0.15, 1.0), 2.0),
-                           _line_list(impulses, (0.85, 0.25, 0.85, 1.0), 3.0))
+        contacts = _entity(
+            t_ns,
+            "contacts",
+            _line_list(normals, (0.95, 0.8, 0.15, 1.0), 2.0),
+            _line_list(impulses, (0.85, 0.25, 0.85, 1.0), 3.0),
+        )
         return bodies + contacts

@@ -3,9 +3,10 @@
 Layout (the public contract is docs/log-format.md):
 - metadata ``isaac`` and attachment ``scene.yaml`` right after the header, before any chunk, so a
   crashed file still carries everything needed to re-simulate;
-- channels ``/world``, ``/bodies``, ``/contacts``, ``/stats`` (protobuf, schema = FileDescriptorSet);
-  one message per step on each (``/world`` only at step 0 and when a body enters or leaves), with
-  ``log_time = publish_time = round(step * dt * 1e9)`` ns and ``sequence = step``;
+- channels ``/world``, ``/bodies``, ``/contacts``, ``/stats`` (protobuf, schema =
+  FileDescriptorSet); one message per step on each (``/world`` only at step 0 and when a body
+  enters or leaves), with ``log_time = publish_time = round(step * dt * 1e9)`` ns and ``sequence =
+step``;
 - chunks are closed (and the file flushed to the OS) after step 0 and every ``flush_every`` steps
   (<= 100), at a step boundary; they also close whenever they pass ``chunk_size`` (256 KiB:
   measured fastest with the mcap library, whose chunk buffer slows down when it grows larger),
@@ -29,8 +30,8 @@ from fractions import Fraction
 import numpy as np
 from mcap.writer import CompressionType, Writer
 
-from isaac.errors import LogError
 from isaac.engine.records import StepRecord, state_hash
+from isaac.errors import LogError
 from recorder import schema as S
 
 PROFILE = "isaac"
@@ -41,8 +42,11 @@ SCENE_ATTACHMENT = "scene.yaml"
 META_START = "isaac"
 META_END = "isaac.end"
 
-COMPRESSION = {"none": CompressionType.NONE, "lz4": CompressionType.LZ4,
-               "zstd": CompressionType.ZSTD}
+COMPRESSION = {
+    "none": CompressionType.NONE,
+    "lz4": CompressionType.LZ4,
+    "zstd": CompressionType.ZSTD,
+}
 
 
 class LogClock:
@@ -74,6 +78,7 @@ def _versions() -> dict[str, str]:
     if engine is None:
         try:
             from importlib.metadata import version
+
             engine = version("isaac-physics")
         except Exception:  # noqa: BLE001 - not installed as a distribution
             engine = "unknown"
@@ -99,6 +104,7 @@ def _cpu_name() -> str:
     except OSError:
         pass
     import platform
+
     return platform.processor() or "unknown"
 
 
@@ -133,17 +139,19 @@ def encode_world(model, step: int, time: float, exists: np.ndarray) -> bytes:
     counts = np.asarray(model.vertex_count)
     for k, name in enumerate(model.names):
         c = int(counts[k])
-        body = b"".join((
-            S.enc_uint(1, k),
-            S.enc_string(2, str(name)),
-            S.enc_doubles(3, np.asarray(model.vertices_local[k, :c], dtype=np.float64)),
-            S.enc_double(4, float(model.mass[k])),
-            S.enc_double(5, float(model.inertia[k])),
-            S.enc_double(6, float(model.restitution[k])),
-            S.enc_uint(7, bool(model.concrete[k])),
-            S.enc_uint(8, bool(exists[k])),
-            S.enc_double(9, float(model.friction[k])),
-        ))
+        body = b"".join(
+            (
+                S.enc_uint(1, k),
+                S.enc_string(2, str(name)),
+                S.enc_doubles(3, np.asarray(model.vertices_local[k, :c], dtype=np.float64)),
+                S.enc_double(4, float(model.mass[k])),
+                S.enc_double(5, float(model.inertia[k])),
+                S.enc_double(6, float(model.restitution[k])),
+                S.enc_uint(7, bool(model.concrete[k])),
+                S.enc_uint(8, bool(exists[k])),
+                S.enc_double(9, float(model.friction[k])),
+            )
+        )
         parts.append(S.enc_bytes(3, body))
     return b"".join(parts)
 
@@ -160,10 +168,19 @@ def encode_bodies(record: StepRecord) -> bytes:
 
 
 _CONTACT_WIRE = (
-    (3, "substep", "<u4"), (4, "a", "<u4"), (5, "b", "<u4"), (6, "feature", "<u4"),
-    (7, "slot", "<u4"), (8, "point", "<f8"), (9, "normal", "<f8"), (10, "depth", "<f8"),
-    (11, "push_a", "<f8"), (12, "push_b", "<f8"), (13, "impulse", "<f8"),
-    (14, "tangent_impulse", "<f8"), (15, "restitution", "<f8"),
+    (3, "substep", "<u4"),
+    (4, "a", "<u4"),
+    (5, "b", "<u4"),
+    (6, "feature", "<u4"),
+    (7, "slot", "<u4"),
+    (8, "point", "<f8"),
+    (9, "normal", "<f8"),
+    (10, "depth", "<f8"),
+    (11, "push_a", "<f8"),
+    (12, "push_b", "<f8"),
+    (13, "impulse", "<f8"),
+    (14, "tangent_impulse", "<f8"),
+    (15, "restitution", "<f8"),
 )
 
 
@@ -178,20 +195,22 @@ def encode_contacts(record: StepRecord) -> bytes:
 
 def encode_stats(step: int, time: float, stats: dict) -> bytes:
     """``isaac.log.Stats`` from the dict made by ``recorder.stats.compute_stats``."""
-    return b"".join((
-        S.enc_uint(1, step),
-        S.enc_double(2, time),
-        S.enc_double(3, stats["kinetic_energy"]),
-        S.enc_double(4, stats["potential_energy"]),
-        S.enc_double(5, stats["total_energy"]),
-        S.enc_double(6, stats["linear_momentum_x"]),
-        S.enc_double(7, stats["linear_momentum_y"]),
-        S.enc_double(8, stats["angular_momentum"]),
-        S.enc_uint(9, stats["contact_count"]),
-        S.enc_double(10, stats["max_depth"]),
-        S.enc_double(11, stats["max_impulse"]),
-        S.enc_string(12, stats["state_hash"]),
-    ))
+    return b"".join(
+        (
+            S.enc_uint(1, step),
+            S.enc_double(2, time),
+            S.enc_double(3, stats["kinetic_energy"]),
+            S.enc_double(4, stats["potential_energy"]),
+            S.enc_double(5, stats["total_energy"]),
+            S.enc_double(6, stats["linear_momentum_x"]),
+            S.enc_double(7, stats["linear_momentum_y"]),
+            S.enc_double(8, stats["angular_momentum"]),
+            S.enc_uint(9, stats["contact_count"]),
+            S.enc_double(10, stats["max_depth"]),
+            S.enc_double(11, stats["max_impulse"]),
+            S.enc_string(12, stats["state_hash"]),
+        )
+    )
 
 
 class McapLogWriter:
@@ -212,10 +231,20 @@ class McapLogWriter:
         are the same either way.
     """
 
-    def __init__(self, path: str, model, scene, scene_text: str, *, flush_every: int = 100,
-                 compression: str = "none", chunk_size: int = 256 * 1024,
-                 background: bool = False, foxglove=None,
-                 metadata: dict[str, str] | None = None) -> None:
+    def __init__(
+        self,
+        path: str,
+        model,
+        scene,
+        scene_text: str,
+        *,
+        flush_every: int = 100,
+        compression: str = "none",
+        chunk_size: int = 256 * 1024,
+        background: bool = False,
+        foxglove=None,
+        metadata: dict[str, str] | None = None,
+    ) -> None:
         if not 1 <= flush_every <= 100:
             raise ValueError("flush_every must be in 1..100")
         if compression not in COMPRESSION:
@@ -234,38 +263,50 @@ class McapLogWriter:
             self._file = open(self.partial_path, "wb")
         except OSError as exc:
             raise LogError(f"cannot write {self.partial_path}: {exc.strerror}") from exc
-        self._writer = Writer(self._file, chunk_size=chunk_size,
-                              compression=COMPRESSION[compression])
+        self._writer = Writer(
+            self._file, chunk_size=chunk_size, compression=COMPRESSION[compression]
+        )
         w = self._writer
         w.start(profile=PROFILE, library=LIBRARY)
         # metadata and attachment first: they sit before every chunk and survive a crash
         if metadata is None:
             metadata = build_metadata(scene, scene_text, len(model.names))
         w.add_metadata(META_START, metadata)
-        w.add_attachment(create_time=0, log_time=0, name=SCENE_ATTACHMENT,
-                         media_type="application/yaml", data=scene_text.encode("utf-8"))
+        w.add_attachment(
+            create_time=0,
+            log_time=0,
+            name=SCENE_ATTACHMENT,
+            media_type="application/yaml",
+            data=scene_text.encode("utf-8"),
+        )
         fds = S.schema_bytes()
         self._channel = {}
         for topic, message in S.TOPICS.items():
-            schema_id = w.register_schema(name=S.full_name(message),
-                                          encoding=S.SCHEMA_ENCODING, data=fds)
+            schema_id = w.register_schema(
+                name=S.full_name(message), encoding=S.SCHEMA_ENCODING, data=fds
+            )
             self._channel[topic] = w.register_channel(
-                topic=topic, message_encoding=S.MESSAGE_ENCODING, schema_id=schema_id)
+                topic=topic, message_encoding=S.MESSAGE_ENCODING, schema_id=schema_id
+            )
         self.foxglove = foxglove
         if foxglove is not None:
             from recorder import foxglove as FG
-            fg_schema = w.register_schema(name=FG.SCHEMA_NAME, encoding=S.SCHEMA_ENCODING,
-                                          data=FG.descriptor_set_bytes())
+
+            fg_schema = w.register_schema(
+                name=FG.SCHEMA_NAME, encoding=S.SCHEMA_ENCODING, data=FG.descriptor_set_bytes()
+            )
             self._channel[FG.TOPIC] = w.register_channel(
-                topic=FG.TOPIC, message_encoding=S.MESSAGE_ENCODING, schema_id=fg_schema)
+                topic=FG.TOPIC, message_encoding=S.MESSAGE_ENCODING, schema_id=fg_schema
+            )
         self._file.flush()
         self._queue: queue.Queue | None = None
         self._thread: threading.Thread | None = None
         if background:
             # bounded: at most ~2 flush intervals in memory; the caller waits if the disk lags
             self._queue = queue.Queue(maxsize=2 * flush_every)
-            self._thread = threading.Thread(target=self._work, name="isaac-mcap-writer",
-                                            daemon=True)
+            self._thread = threading.Thread(
+                target=self._work, name="isaac-mcap-writer", daemon=True
+            )
             self._thread.start()
 
     def write(self, record: StepRecord, stats: dict) -> None:
@@ -283,23 +324,24 @@ class McapLogWriter:
         else:
             self._queue.put(item)
 
-    def write_messages(self, step: int, time: float, exists: np.ndarray, bodies, contacts,
-                       stats: dict) -> None:
+    def write_messages(
+        self, step: int, time: float, exists: np.ndarray, bodies, contacts, stats: dict
+    ) -> None:
         """Append one step already encoded (``bodies``, ``contacts``: the bytes `encode_bodies`
         and `encode_contacts` give; ``stats`` with its ``state_hash``), in this thread: what a
         writer process does with the frames `recorder.pack` encodes."""
         if self._queue is not None:
             raise LogError("write_messages is for a writer without a background thread")
         world_changed, flush = self._count(step, exists)
-        self._add(step, time, exists if world_changed else None, bodies, contacts, stats, None,
-                  flush)
+        self._add(
+            step, time, exists if world_changed else None, bodies, contacts, stats, None, flush
+        )
 
     def _count(self, step: int, exists: np.ndarray) -> tuple[bool, bool]:
         """Note one more step: whether existence changed (a ``/world`` message is due) and
         whether the chunk closes after it (at once for the first step, where the schemas and
         channels live, then every ``flush_every`` steps)."""
-        world_changed = self._last_exists is None or not np.array_equal(exists,
-                                                                         self._last_exists)
+        world_changed = self._last_exists is None or not np.array_equal(exists, self._last_exists)
         if world_changed:
             self._last_exists = np.array(exists, dtype=bool)
         self.steps_written += 1
@@ -310,8 +352,16 @@ class McapLogWriter:
         record, stats, world_changed, flush = item
         if "state_hash" not in stats:
             stats = {**stats, "state_hash": state_hash(record)}
-        self._add(record.step, record.time, record.exists if world_changed else None,
-                  encode_bodies(record), encode_contacts(record), stats, record, flush)
+        self._add(
+            record.step,
+            record.time,
+            record.exists if world_changed else None,
+            encode_bodies(record),
+            encode_contacts(record),
+            stats,
+            record,
+            flush,
+        )
 
     def _add(self, step, time, world_exists, bodies, contacts, stats, record, flush) -> None:
         """The step's messages (``/world`` first, with ``world_exists``, when given;
@@ -349,8 +399,9 @@ class McapLogWriter:
             self._thread.join()
             self._thread = None
 
-    def close(self, *, complete: bool = True, stopped_at: int | None = None,
-              reason: str | None = None) -> str:
+    def close(
+        self, *, complete: bool = True, stopped_at: int | None = None, reason: str | None = None
+    ) -> str:
         """Finish the file (end metadata, summary, index) and rename it; returns the final path."""
         if self._closed:
             return self.path
@@ -360,9 +411,16 @@ class McapLogWriter:
             self._file.close()
             raise LogError(f"writing {self.partial_path} failed: {self._error}")
         self._writer.flush()
-        self._writer.add_metadata(META_END, end_metadata(
-            complete=complete, steps=self.steps_written, last_step=self.last_step,
-            stopped_at=stopped_at, reason=reason))
+        self._writer.add_metadata(
+            META_END,
+            end_metadata(
+                complete=complete,
+                steps=self.steps_written,
+                last_step=self.last_step,
+                stopped_at=stopped_at,
+                reason=reason,
+            ),
+        )
         self._writer.finish()
         self._file.flush()
         os.fsync(self._file.fileno())
@@ -381,8 +439,9 @@ class McapLogWriter:
                 self._file.close()
 
 
-def end_metadata(*, complete: bool, steps: int, last_step: int | None,
-                 stopped_at: int | None, reason: str | None) -> dict[str, str]:
+def end_metadata(
+    *, complete: bool, steps: int, last_step: int | None, stopped_at: int | None, reason: str | None
+) -> dict[str, str]:
     """The ``isaac.end`` metadata record written when a log is closed."""
     return {
         "complete": "true" if complete else "false",

@@ -6,8 +6,8 @@ writing the two protobuf messages exactly as `recorder.mcap_writer`'s `encode_bo
 `encode_contacts` do (tests compare the bytes), so the MCAP writer process hands them to the
 mcap library as they are. One compiled call (`pack_frame`) writes every tag and length,
 checks every float for NaN and infinity (the recorder's never-write-NaN check), computes the
-`/stats` sums with `isaac.engine.diagnostics`' own kernel (`pack_layout`), copies each field's values
-with memcpy and writes the frame's head; in Python it was 18 memcpys and a struct, about 15
+`/stats` sums with `isaac.engine.diagnostics`' own kernel (`pack_layout`), copies each field's
+values with memcpy and writes the frame's head; in Python it was 18 memcpys and a struct, about 15
 us a step. Needs a little-endian machine (the caller checks).
 
 Wire format (recorder.schema): a scalar field is its tag and a varint (uint) or 8 little-endian
@@ -28,8 +28,21 @@ from isaac.engine.diagnostics import _sums
 
 # the fields of Bodies (numbers 3-7) and Contacts (3-15), in the order of recorder.schema
 BODY_FIELDS = ("position", "angle", "velocity", "angular_velocity", "exists")
-CONTACT_FIELDS = ("substep", "a", "b", "feature", "slot", "point", "normal", "depth", "push_a",
-                  "push_b", "impulse", "tangent_impulse", "restitution")
+CONTACT_FIELDS = (
+    "substep",
+    "a",
+    "b",
+    "feature",
+    "slot",
+    "point",
+    "normal",
+    "depth",
+    "push_a",
+    "push_b",
+    "impulse",
+    "tangent_impulse",
+    "restitution",
+)
 BODY_ROW_BYTES = (16, 8, 16, 8, 1)
 CONTACT_ROW_BYTES = (4, 4, 4, 4, 4, 16, 16, 8, 16, 16, 8, 8, 8)
 BODY_ROW_BYTES_A = np.array(BODY_ROW_BYTES, dtype=np.int64)  # the same, for the kernel
@@ -59,8 +72,7 @@ def message_sizes(step: int, n: int, m: int) -> tuple[int, int]:
     """Exact byte sizes of the Bodies and Contacts messages of a step with n bodies and m
     contact rows (compiled: the simulating process asks once per step)."""
     head = 1 + varint_size(step) + 1 + 8
-    return (_message_size(head, n, BODY_ROW_BYTES_A),
-            _message_size(head, m, CONTACT_ROW_BYTES_A))
+    return (_message_size(head, n, BODY_ROW_BYTES_A), _message_size(head, m, CONTACT_ROW_BYTES_A))
 
 
 @numba.njit(cache=True, nogil=True)
@@ -110,12 +122,14 @@ def _finite(src):
 
 
 @numba.njit(cache=True, nogil=True)
-def _stat_sums(mass, inertia, concrete, exists, position, velocity, angular_velocity, depth,
-               impulse, gx, gy):
+def _stat_sums(
+    mass, inertia, concrete, exists, position, velocity, angular_velocity, depth, impulse, gx, gy
+):
     """(kinetic, potential energy, linear momentum x, y, angular momentum, max depth, max
     impulse) of a step, as `recorder.stats.compute_stats` has them."""
-    ke, pe, px, py, ang = _sums(mass, inertia, concrete, exists, position, velocity,
-                                angular_velocity, gx, gy)
+    ke, pe, px, py, ang = _sums(
+        mass, inertia, concrete, exists, position, velocity, angular_velocity, gx, gy
+    )
     max_depth = depth[0] if depth.size else 0.0
     max_impulse = impulse[0] if impulse.size else 0.0
     for i in range(1, depth.size):
@@ -146,9 +160,33 @@ def _write_head(words, ints, base, step, time, n, m, sums):
 
 
 @numba.njit(cache=True, nogil=True)
-def pack_layout(buf, base, step, time, n, m, contacts_at, position, angle, velocity,
-                angular_velocity, exists, point, normal, depth, push_a, push_b, impulse,
-                tangent_impulse, restitution, mass, inertia, concrete, gx, gy):
+def pack_layout(
+    buf,
+    base,
+    step,
+    time,
+    n,
+    m,
+    contacts_at,
+    position,
+    angle,
+    velocity,
+    angular_velocity,
+    exists,
+    point,
+    normal,
+    depth,
+    push_a,
+    push_b,
+    impulse,
+    tangent_impulse,
+    restitution,
+    mass,
+    inertia,
+    concrete,
+    gx,
+    gy,
+):
     """Write the tags and lengths of Bodies at ``buf[base:]`` and of Contacts at
     ``buf[base + contacts_at:]`` for n bodies and m contact rows.
 
@@ -193,10 +231,25 @@ def pack_layout(buf, base, step, time, n, m, contacts_at, position, angle, veloc
         bad = 16
     if bad < 0 and not _finite(restitution):
         bad = 17
-    return bad, offsets, bodies_len, contacts_len, _stat_sums(
-        mass, inertia, concrete, exists, position, velocity, angular_velocity, depth, impulse,
-        gx, gy)
-
+    return (
+        bad,
+        offsets,
+        bodies_len,
+        contacts_len,
+        _stat_sums(
+            mass,
+            inertia,
+            concrete,
+            exists,
+            position,
+            velocity,
+            angular_velocity,
+            depth,
+            impulse,
+            gx,
+            gy,
+        ),
+    )
 
 
 @intrinsic
@@ -204,8 +257,12 @@ def _copy_bytes(typingctx, dst, at, src):
     """memcpy of a C-contiguous array's bytes to ``dst[at:]`` (uint8): numba's own byte loops
     ran at 2-3 GB/s, 30x slower than memcpy for a 160 kB step, and the packed fields sit at
     unaligned offsets, out of reach of a float64 view."""
-    if not (isinstance(dst, types.Array) and isinstance(src, types.Array)
-            and src.layout == "C" and isinstance(at, types.Integer)):
+    if not (
+        isinstance(dst, types.Array)
+        and isinstance(src, types.Array)
+        and src.layout == "C"
+        and isinstance(at, types.Integer)
+    ):
         return None
 
     def codegen(context, builder, sig, args):
@@ -235,10 +292,38 @@ HEAD_BYTES = 120  # writer_process._HEAD: step, time, n, m, 9 stats, 2 message l
 
 
 @numba.njit(cache=True, nogil=True)
-def pack_frame(buf, pos, step, time, n, m, contacts_at, position, angle, velocity,
-               angular_velocity, exists, substep, a, b, feature, slot, point, normal, depth,
-               push_a, push_b, impulse, tangent_impulse, restitution, mass, inertia, concrete,
-               gx, gy):
+def pack_frame(
+    buf,
+    pos,
+    step,
+    time,
+    n,
+    m,
+    contacts_at,
+    position,
+    angle,
+    velocity,
+    angular_velocity,
+    exists,
+    substep,
+    a,
+    b,
+    feature,
+    slot,
+    point,
+    normal,
+    depth,
+    push_a,
+    push_b,
+    impulse,
+    tangent_impulse,
+    restitution,
+    mass,
+    inertia,
+    concrete,
+    gx,
+    gy,
+):
     """A whole MCAP frame at byte ``pos`` (a multiple of 8) of ``buf`` (uint8): the head
     (writer_process._HEAD, native = little-endian: step, time s, n, m, the nine /stats values,
     the two messages' lengths), the Bodies message at ``pos + HEAD_BYTES`` and the Contacts
@@ -249,9 +334,32 @@ def pack_frame(buf, pos, step, time, n, m, contacts_at, position, angle, velocit
     holding a NaN or an infinity (nothing then is fit to send).
     """
     bad, offsets, bodies_len, contacts_len, sums = pack_layout(
-        buf, pos + HEAD_BYTES, step, time, n, m, contacts_at, position, angle, velocity,
-        angular_velocity, exists, point, normal, depth, push_a, push_b, impulse,
-        tangent_impulse, restitution, mass, inertia, concrete, gx, gy)
+        buf,
+        pos + HEAD_BYTES,
+        step,
+        time,
+        n,
+        m,
+        contacts_at,
+        position,
+        angle,
+        velocity,
+        angular_velocity,
+        exists,
+        point,
+        normal,
+        depth,
+        push_a,
+        push_b,
+        impulse,
+        tangent_impulse,
+        restitution,
+        mass,
+        inertia,
+        concrete,
+        gx,
+        gy,
+    )
     if bad >= 0:
         return bad, bodies_len, contacts_len
     _put_values(buf, offsets[0], position)
@@ -272,8 +380,8 @@ def pack_frame(buf, pos, step, time, n, m, contacts_at, position, angle, velocit
     _put_values(buf, offsets[15], impulse)
     _put_values(buf, offsets[16], tangent_impulse)
     _put_values(buf, offsets[17], restitution)
-    ints = buf[pos:pos + HEAD_BYTES].view(np.int64)
-    _write_head(buf[pos:pos + HEAD_BYTES].view(np.float64), ints, 0, step, time, n, m, sums)
+    ints = buf[pos : pos + HEAD_BYTES].view(np.int64)
+    _write_head(buf[pos : pos + HEAD_BYTES].view(np.float64), ints, 0, step, time, n, m, sums)
     ints[13] = bodies_len
     ints[14] = contacts_len
     return bad, bodies_len, contacts_len
@@ -338,9 +446,30 @@ def _first(bad, k):
 
 
 @numba.njit(cache=True, nogil=True)
-def pack_rerun(buf, at, step, time, position, angle, exists, velocity, angular_velocity, point,
-               normal, depth, push_a, push_b, impulse, tangent_impulse, restitution, mass,
-               inertia, concrete, gx, gy):
+def pack_rerun(
+    buf,
+    at,
+    step,
+    time,
+    position,
+    angle,
+    exists,
+    velocity,
+    angular_velocity,
+    point,
+    normal,
+    depth,
+    push_a,
+    push_b,
+    impulse,
+    tangent_impulse,
+    restitution,
+    mass,
+    inertia,
+    concrete,
+    gx,
+    gy,
+):
     """Write a step's Rerun frame (layout above) at byte ``at`` (a multiple of 8) of ``buf``
     (uint8, a multiple of 8 bytes long), check every float of the record and sum the `/stats`
     values as `pack_layout` does.
@@ -385,7 +514,26 @@ def pack_rerun(buf, at, step, time, position, angle, exists, velocity, angular_v
         bad = _first(bad, 16)
     if not _finite(restitution):
         bad = _first(bad, 17)
-    _write_head(words, ints, base, step, time, n, m, _stat_sums(
-        mass, inertia, concrete, exists, position, velocity, angular_velocity, depth, impulse,
-        gx, gy))
+    _write_head(
+        words,
+        ints,
+        base,
+        step,
+        time,
+        n,
+        m,
+        _stat_sums(
+            mass,
+            inertia,
+            concrete,
+            exists,
+            position,
+            velocity,
+            angular_velocity,
+            depth,
+            impulse,
+            gx,
+            gy,
+        ),
+    )
     return bad

@@ -26,8 +26,8 @@ from __future__ import annotations
 import io
 import json
 import os
+from collections.abc import Iterator
 from dataclasses import dataclass, field
-from typing import Iterator
 
 import numpy as np
 from mcap.exceptions import McapError
@@ -35,11 +35,17 @@ from mcap.records import Attachment, Channel, Header, Message, Metadata, Schema
 from mcap.stream_reader import StreamReader
 from mcap.writer import Writer
 
-from isaac.errors import LogError
 from isaac.engine.records import Contacts, StepRecord
+from isaac.errors import LogError
 from recorder import schema as S
-from recorder.mcap_writer import (COMPRESSION, FORMAT_NAME, META_END, META_START,
-                                  SCENE_ATTACHMENT, end_metadata)
+from recorder.mcap_writer import (
+    COMPRESSION,
+    FORMAT_NAME,
+    META_END,
+    META_START,
+    SCENE_ATTACHMENT,
+    end_metadata,
+)
 
 MCAP_MAGIC = b"\x89MCAP0\r\n"
 
@@ -66,23 +72,26 @@ class WorldTable:
     exists: np.ndarray
 
     @staticmethod
-    def from_message(msg: dict) -> "WorldTable":
+    def from_message(msg: dict) -> WorldTable:
         bodies = sorted(msg["bodies"], key=lambda b: b["index"])
         n = len(bodies)
         counts = np.array([b["vertices_local"].size // 2 for b in bodies], dtype=np.int64)
         v_max = int(counts.max()) if n else 0
         local = np.zeros((n, v_max, 2))
         for k, b in enumerate(bodies):
-            local[k, :counts[k]] = b["vertices_local"].reshape(-1, 2)
+            local[k, : counts[k]] = b["vertices_local"].reshape(-1, 2)
         return WorldTable(
-            step=int(msg["step"]), names=[b["name"] for b in bodies], vertices_local=local,
+            step=int(msg["step"]),
+            names=[b["name"] for b in bodies],
+            vertices_local=local,
             vertex_count=counts,
             mass=np.array([b["mass"] for b in bodies], dtype=np.float64),
             inertia=np.array([b["inertia"] for b in bodies], dtype=np.float64),
             restitution=np.array([b["restitution"] for b in bodies], dtype=np.float64),
             friction=np.array([b["friction"] for b in bodies], dtype=np.float64),
             concrete=np.array([b["concrete"] for b in bodies], dtype=bool),
-            exists=np.array([b["exists"] for b in bodies], dtype=bool))
+            exists=np.array([b["exists"] for b in bodies], dtype=bool),
+        )
 
 
 @dataclass(frozen=True, eq=False)
@@ -121,23 +130,44 @@ def record_from_messages(bodies: dict, contacts: dict) -> StepRecord:
     """A StepRecord from decoded `/bodies` and `/contacts` messages (arrays are read-only views)."""
     n = bodies["angle"].size
     return StepRecord(
-        step=int(bodies["step"]), time=float(bodies["time"]),
-        position=bodies["position"].reshape(n, 2), angle=bodies["angle"],
-        velocity=bodies["velocity"].reshape(n, 2), angular_velocity=bodies["angular_velocity"],
+        step=int(bodies["step"]),
+        time=float(bodies["time"]),
+        position=bodies["position"].reshape(n, 2),
+        angle=bodies["angle"],
+        velocity=bodies["velocity"].reshape(n, 2),
+        angular_velocity=bodies["angular_velocity"],
         exists=bodies["exists"] if bodies["exists"].size == n else np.ones(n, dtype=bool),
-        contacts=contacts_from_message(contacts))
+        contacts=contacts_from_message(contacts),
+    )
 
 
 def contacts_from_message(msg: dict) -> Contacts:
     m = msg["a"].size
-    i32 = (lambda k: msg[k].astype(np.int32) if msg[k].size == m else np.zeros(m, np.int32))
-    f = (lambda k: msg[k] if msg[k].size == m else np.zeros(m))
-    v = (lambda k: msg[k].reshape(m, 2) if msg[k].size == 2 * m else np.zeros((m, 2)))
+
+    def i32(k):
+        return msg[k].astype(np.int32) if msg[k].size == m else np.zeros(m, np.int32)
+
+    def f(k):
+        return msg[k] if msg[k].size == m else np.zeros(m)
+
+    def v(k):
+        return msg[k].reshape(m, 2) if msg[k].size == 2 * m else np.zeros((m, 2))
+
     return Contacts(
-        substep=i32("substep"), a=i32("a"), b=i32("b"), feature=i32("feature"), slot=i32("slot"),
-        point=v("point"), normal=v("normal"), depth=f("depth"), push_a=v("push_a"),
-        push_b=v("push_b"), impulse=f("impulse"), tangent_impulse=f("tangent_impulse"),
-        restitution=f("restitution"))
+        substep=i32("substep"),
+        a=i32("a"),
+        b=i32("b"),
+        feature=i32("feature"),
+        slot=i32("slot"),
+        point=v("point"),
+        normal=v("normal"),
+        depth=f("depth"),
+        push_a=v("push_a"),
+        push_b=v("push_b"),
+        impulse=f("impulse"),
+        tangent_impulse=f("tangent_impulse"),
+        restitution=f("restitution"),
+    )
 
 
 class LogReader:
@@ -187,8 +217,9 @@ class LogReader:
     def _records(self, *, emit_chunks: bool = False) -> Iterator:
         """Every MCAP record in file order; stops quietly at the first damaged one."""
         with open(self.path, "rb") as f:
-            reader = StreamReader(f, emit_chunks=emit_chunks, validate_crcs=True,
-                                  record_size_limit=max(self.size, 1))
+            reader = StreamReader(
+                f, emit_chunks=emit_chunks, validate_crcs=True, record_size_limit=max(self.size, 1)
+            )
             it = reader.records
             while True:
                 try:
@@ -229,8 +260,9 @@ class LogReader:
                 try:
                     decoded = S.decode(S.TOPICS[topic], record.data)
                 except (S.WireError, UnicodeDecodeError) as exc:
-                    raise LogError(f"{self.path}: step {record.sequence}: bad {topic} message "
-                                   f"({exc})") from exc
+                    raise LogError(
+                        f"{self.path}: step {record.sequence}: bad {topic} message ({exc})"
+                    ) from exc
                 yield topic, record, decoded
             elif isinstance(record, Metadata) and record.name == META_END:
                 self._end = dict(record.metadata)
@@ -245,8 +277,11 @@ class LogReader:
 
         def emit():
             if "/bodies" in pending and "/contacts" in pending and world is not None:
-                return LoggedStep(record_from_messages(pending["/bodies"], pending["/contacts"]),
-                                  pending.get("/stats"), world)
+                return LoggedStep(
+                    record_from_messages(pending["/bodies"], pending["/contacts"]),
+                    pending.get("/stats"),
+                    world,
+                )
             return None
 
         for topic, message, decoded in self.messages():
@@ -297,6 +332,7 @@ class LogReader:
     def scene(self):
         """The run's `isaac.scene.Scene`, loaded from the embedded ``scene.yaml``."""
         from isaac.scene import load_scene_text
+
         return load_scene_text(self.scene_text, f"{self.path}:{SCENE_ATTACHMENT}")
 
     @property
@@ -377,11 +413,16 @@ def recover(src: str, dst: str) -> tuple[int, int | None]:
     except OSError as exc:
         raise LogError(f"cannot write {tmp}: {exc.strerror}") from exc
     with out:
-        writer = Writer(out, chunk_size=256 * 1024,
-                        compression=COMPRESSION.get(compression, COMPRESSION["none"]))
+        writer = Writer(
+            out,
+            chunk_size=256 * 1024,
+            compression=COMPRESSION.get(compression, COMPRESSION["none"]),
+        )
         header = log.header
-        writer.start(profile=header.profile if header else "isaac",
-                     library=header.library if header else "isaac-recorder")
+        writer.start(
+            profile=header.profile if header else "isaac",
+            library=header.library if header else "isaac-recorder",
+        )
         schema_ids: dict[int, int] = {}
         channel_ids: dict[int, int] = {}
         end = None
@@ -393,29 +434,45 @@ def recover(src: str, dst: str) -> tuple[int, int | None]:
                 else:
                     writer.add_metadata(record.name, dict(record.metadata))
             elif isinstance(record, Attachment):
-                writer.add_attachment(record.create_time, record.log_time, record.name,
-                                      record.media_type, record.data)
+                writer.add_attachment(
+                    record.create_time, record.log_time, record.name, record.media_type, record.data
+                )
         count = 0
         for record in log._records():
             if isinstance(record, Schema) and record.id not in schema_ids:
-                schema_ids[record.id] = writer.register_schema(record.name, record.encoding,
-                                                               record.data)
+                schema_ids[record.id] = writer.register_schema(
+                    record.name, record.encoding, record.data
+                )
             elif isinstance(record, Channel) and record.id not in channel_ids:
                 channel_ids[record.id] = writer.register_channel(
-                    record.topic, record.message_encoding, schema_ids.get(record.schema_id, 0),
-                    dict(record.metadata))
+                    record.topic,
+                    record.message_encoding,
+                    schema_ids.get(record.schema_id, 0),
+                    dict(record.metadata),
+                )
             elif isinstance(record, Message):
                 if record.sequence in complete_steps or (
-                        channels.get(record.channel_id) == "/world" and last is not None
-                        and record.sequence <= last):
-                    writer.add_message(channel_ids[record.channel_id], record.log_time,
-                                       record.data, record.publish_time, record.sequence)
+                    channels.get(record.channel_id) == "/world"
+                    and last is not None
+                    and record.sequence <= last
+                ):
+                    writer.add_message(
+                        channel_ids[record.channel_id],
+                        record.log_time,
+                        record.data,
+                        record.publish_time,
+                        record.sequence,
+                    )
                     if channels.get(record.channel_id) == "/stats":
                         count += 1
         if end is None or not log.closed_cleanly:
-            end = end_metadata(complete=False, steps=count, last_step=last,
-                               stopped_at=None if last is None else last + 1,
-                               reason="recovered from a log that was not closed")
+            end = end_metadata(
+                complete=False,
+                steps=count,
+                last_step=last,
+                stopped_at=None if last is None else last + 1,
+                reason="recovered from a log that was not closed",
+            )
             end["recovered"] = "true"
         writer.add_metadata(META_END, end)
         writer.finish()

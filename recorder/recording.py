@@ -18,11 +18,11 @@ from __future__ import annotations
 
 import os
 
-
-from isaac.errors import IsaacError, LogError, SimulationError
 from isaac.engine.records import StepRecord
+from isaac.errors import IsaacError, LogError, SimulationError
 from isaac.tuning import reuse_large_buffers
 from recorder.stats import check_finite, compute_stats
+
 
 class Recorder:
     """Records a `Simulation` run to MCAP (``mcap_path``) and/or Rerun (``rrd_path``).
@@ -42,10 +42,19 @@ class Recorder:
         bytes are the same in all three.
     """
 
-    def __init__(self, sim, mcap_path: str | None = None, rrd_path: str | None = None, *,
-                 scene_text: str | None = None, compression: str = "none",
-                 flush_every: int = 100, foxglove: bool = False,
-                 impulse_scale: float | None = None, offload: str = "process") -> None:
+    def __init__(
+        self,
+        sim,
+        mcap_path: str | None = None,
+        rrd_path: str | None = None,
+        *,
+        scene_text: str | None = None,
+        compression: str = "none",
+        flush_every: int = 100,
+        foxglove: bool = False,
+        impulse_scale: float | None = None,
+        offload: str = "process",
+    ) -> None:
         # a step's messages are 100 kB and more: keep such buffers in the heap (isaac.tuning)
         reuse_large_buffers()
         self.sim = sim
@@ -71,6 +80,7 @@ class Recorder:
         self._restore_affinity: set[int] | None = None
         if offload == "process":
             from recorder.writer_process import plan_cpus
+
             plan = plan_cpus((mcap_path is not None) + (rrd_path is not None))
             if plan is not None:
                 # the writers on CPUs of their own, this process on the others, until close
@@ -79,8 +89,9 @@ class Recorder:
                 self._cpus = iter(plan[1])
         try:
             if mcap_path is not None:
-                self.mcap = self._mcap_writer(mcap_path, offload, compression, flush_every,
-                                              foxglove, impulse_scale)
+                self.mcap = self._mcap_writer(
+                    mcap_path, offload, compression, flush_every, foxglove, impulse_scale
+                )
             if rrd_path is not None:
                 self.rerun = self._rerun_writer(rrd_path, offload, impulse_scale)
         except BaseException:
@@ -93,33 +104,63 @@ class Recorder:
         fox = None
         if foxglove:
             from recorder.rerun_writer import default_scales
+
             auto_impulse, normal_length = default_scales(self.model)
-            fox = {"normal_length": normal_length,
-                   "impulse_scale": auto_impulse if impulse_scale is None else impulse_scale}
+            fox = {
+                "normal_length": normal_length,
+                "impulse_scale": auto_impulse if impulse_scale is None else impulse_scale,
+            }
         if offload == "process":
             from recorder.writer_process import WriterProcess, model_table
-            return WriterProcess("mcap", path, cpus=next(self._cpus, None), config={
-                "model": model_table(self.model), "gravity": self.gravity,
-                "scene": {"name": str(self.scene.name), "dt": float(self.scene.world.dt)},
-                "scene_text": self.scene_text,
-                "metadata": build_metadata(self.scene, self.scene_text, len(self.model.names)),
-                "flush_every": flush_every, "compression": compression, "foxglove": fox})
+
+            return WriterProcess(
+                "mcap",
+                path,
+                cpus=next(self._cpus, None),
+                config={
+                    "model": model_table(self.model),
+                    "gravity": self.gravity,
+                    "scene": {"name": str(self.scene.name), "dt": float(self.scene.world.dt)},
+                    "scene_text": self.scene_text,
+                    "metadata": build_metadata(self.scene, self.scene_text, len(self.model.names)),
+                    "flush_every": flush_every,
+                    "compression": compression,
+                    "foxglove": fox,
+                },
+            )
         scene_encoder = None
         if fox is not None:
             from recorder.foxglove import SceneEncoder
+
             scene_encoder = SceneEncoder(self.model, **fox)
-        return McapLogWriter(path, self.model, self.scene, self.scene_text,
-                             flush_every=flush_every, compression=compression,
-                             foxglove=scene_encoder, background=offload == "thread")
+        return McapLogWriter(
+            path,
+            self.model,
+            self.scene,
+            self.scene_text,
+            flush_every=flush_every,
+            compression=compression,
+            foxglove=scene_encoder,
+            background=offload == "thread",
+        )
 
     def _rerun_writer(self, path, offload, impulse_scale):
         if offload == "process":
             from recorder.writer_process import WriterProcess, model_table
-            return WriterProcess("rerun", path, cpus=next(self._cpus, None), config={
-                "model": model_table(self.model), "gravity": self.gravity,
-                "scene": {"name": str(self.scene.name), "dt": float(self.scene.world.dt)},
-                "impulse_scale": impulse_scale})
+
+            return WriterProcess(
+                "rerun",
+                path,
+                cpus=next(self._cpus, None),
+                config={
+                    "model": model_table(self.model),
+                    "gravity": self.gravity,
+                    "scene": {"name": str(self.scene.name), "dt": float(self.scene.world.dt)},
+                    "impulse_scale": impulse_scale,
+                },
+            )
         from recorder.rerun_writer import RerunLogWriter
+
         return RerunLogWriter(path, self.model, self.scene, impulse_scale=impulse_scale)
 
     def wait_ready(self) -> None:
@@ -150,20 +191,23 @@ class Recorder:
         # only MCAP's /stats carries the state hash: its writer computes it; writer processes
         # get the rest of the stats from the pass that copies the record (recorder.pack)
         stats = None
-        if not all(getattr(w, "checks_finite", False) for w in (self.mcap, self.rerun)
-                   if w is not None):
+        if not all(
+            getattr(w, "checks_finite", False) for w in (self.mcap, self.rerun) if w is not None
+        ):
             stats = compute_stats(self.model, self.gravity, record, with_hash=False)
         for writer in (self.mcap, self.rerun):
             if writer is not None and writer.write(record, stats) is False:
                 # a writer process found a NaN or infinity while copying: nothing was sent
                 check_finite(self.model.names, record)
-                raise SimulationError(f"step {record.step}: a recorded value is not finite",
-                                      step=record.step)
+                raise SimulationError(
+                    f"step {record.step}: a recorded value is not finite", step=record.step
+                )
         self.steps_written += 1
         self.last_step = record.step
 
-    def close(self, complete: bool = True, stopped_at: int | None = None,
-              reason: str | None = None) -> dict[str, str]:
+    def close(
+        self, complete: bool = True, stopped_at: int | None = None, reason: str | None = None
+    ) -> dict[str, str]:
         """Finish both files cleanly (keeping every step written) and rename them.
 
         complete: False when the run was interrupted or failed; then ``stopped_at`` (default: the
@@ -180,8 +224,9 @@ class Recorder:
             if writer is None:
                 continue
             try:
-                self.paths[key] = writer.close(complete=complete, stopped_at=stopped_at,
-                                               reason=reason)
+                self.paths[key] = writer.close(
+                    complete=complete, stopped_at=stopped_at, reason=reason
+                )
             except Exception as exc:  # noqa: BLE001 - close the other file, then report
                 errors.append(f"{key}: {exc}")
         self._release_cpus()
@@ -207,7 +252,7 @@ class Recorder:
                     pass
         self.closed = True
 
-    def __enter__(self) -> "Recorder":
+    def __enter__(self) -> Recorder:
         return self
 
     def __exit__(self, exc_type, exc, tb) -> bool:

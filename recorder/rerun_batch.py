@@ -44,8 +44,22 @@ def step_outlines(angle, position, idx, local, counts, out, at):
 
 
 @numba.njit(cache=True, nogil=True)
-def step_contacts(point, normal, impulse, push_a, push_b, normal_length, impulse_scale,
-                  points, normals, impulses, at, push_pt, push_v, push_at):
+def step_contacts(
+    point,
+    normal,
+    impulse,
+    push_a,
+    push_b,
+    normal_length,
+    impulse_scale,
+    points,
+    normals,
+    impulses,
+    at,
+    push_pt,
+    push_v,
+    push_at,
+):
     """A step's contact points and arrows (float32, m), written from row ``at`` of points,
     normals and impulses and from row ``push_at`` of push_pt and push_v; returns the row after
     the last push arrow written.
@@ -80,13 +94,46 @@ def step_contacts(point, normal, impulse, push_a, push_b, normal_length, impulse
 
 
 @numba.njit(cache=True, nogil=True)
-def step_arrays(angle, position, idx, local, counts, strips, strip_at, point, normal, impulse,
-                push_a, push_b, normal_length, impulse_scale, points, normals, impulses,
-                row_at, push_pt, push_v, push_at):
+def step_arrays(
+    angle,
+    position,
+    idx,
+    local,
+    counts,
+    strips,
+    strip_at,
+    point,
+    normal,
+    impulse,
+    push_a,
+    push_b,
+    normal_length,
+    impulse_scale,
+    points,
+    normals,
+    impulses,
+    row_at,
+    push_pt,
+    push_v,
+    push_at,
+):
     """`step_outlines` and `step_contacts` of one step in one call (one dispatch per step);
     returns the next free rows of strips and of the push arrows."""
     strip_end = step_outlines(angle, position, idx, local, counts, strips, strip_at)
-    push_end = step_contacts(point, normal, impulse, push_a, push_b, normal_length,
-                             impulse_scale, points, normals, impulses, row_at, push_pt, push_v,
-                             push_at)
+    push_end = step_contacts(
+        point,
+        normal,
+        impulse,
+        push_a,
+        push_b,
+        normal_length,
+        impulse_scale,
+        points,
+        normals,
+        impulses,
+        row_at,
+        push_pt,
+        push_v,
+        push_at,
+    )
     return strip_end, push_end

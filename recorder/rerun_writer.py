@@ -28,13 +28,21 @@ import numpy as np
 import pyarrow as pa
 import rerun as rr
 
-from isaac.errors import LogError
 from isaac.engine.records import StepRecord
+from isaac.errors import LogError
 
 APP_ID = "isaac"
-STAT_NAMES = ("kinetic_energy", "potential_energy", "total_energy", "linear_momentum_x",
-              "linear_momentum_y", "angular_momentum", "contact_count", "max_depth",
-              "max_impulse")
+STAT_NAMES = (
+    "kinetic_energy",
+    "potential_energy",
+    "total_energy",
+    "linear_momentum_x",
+    "linear_momentum_y",
+    "angular_momentum",
+    "contact_count",
+    "max_depth",
+    "max_impulse",
+)
 
 _MOVING = [70, 140, 230]
 _CONCRETE = [150, 150, 150]
@@ -90,8 +98,7 @@ def _column(descriptor, batch_type, values: pa.Array, counts: np.ndarray) -> rr.
 
 def _vec2(points: np.ndarray) -> pa.Array:
     """(k, 2) float32 as Rerun's Vec2D arrow array (fixed-size lists of 2), without a copy."""
-    return pa.FixedSizeListArray.from_arrays(pa.array(points.reshape(-1)),
-                                             type=_VEC2_TYPE)
+    return pa.FixedSizeListArray.from_arrays(pa.array(points.reshape(-1)), type=_VEC2_TYPE)
 
 
 _VEC2_TYPE = rr.components.Position2DBatch._ARROW_DATATYPE
@@ -106,8 +113,29 @@ def _load_kernels() -> None:
     z1, z2, f2 = np.zeros(1), np.zeros((1, 2)), np.zeros((4, 2), dtype=np.float32)
     one = np.ones(1, dtype=np.int64)
     step_outlines(z1, z2, np.zeros(1, dtype=np.int64), np.zeros((1, 2, 2)), one, f2, 0)
-    step_arrays(z1, z2, np.zeros(1, dtype=np.int64), np.zeros((1, 2, 2)), one, f2, 0, z2, z2,
-                z1, z2, z2, 1.0, 1.0, f2, f2, f2, 0, f2, f2, 0)
+    step_arrays(
+        z1,
+        z2,
+        np.zeros(1, dtype=np.int64),
+        np.zeros((1, 2, 2)),
+        one,
+        f2,
+        0,
+        z2,
+        z2,
+        z1,
+        z2,
+        z2,
+        1.0,
+        1.0,
+        f2,
+        f2,
+        f2,
+        0,
+        f2,
+        f2,
+        0,
+    )
 
 
 class RerunLogWriter:
@@ -123,9 +151,17 @@ class RerunLogWriter:
         does, so that the steps behind a batch are taken at once); otherwise in the caller.
     """
 
-    def __init__(self, path: str, model, scene, *, impulse_scale: float | None = None,
-                 normal_length: float | None = None, batch: int = 100,
-                 background: bool = False) -> None:
+    def __init__(
+        self,
+        path: str,
+        model,
+        scene,
+        *,
+        impulse_scale: float | None = None,
+        normal_length: float | None = None,
+        batch: int = 100,
+        background: bool = False,
+    ) -> None:
         self.path = str(path)
         self.partial_path = self.path + ".partial"
         self.model = model
@@ -154,29 +190,44 @@ class RerunLogWriter:
         self.rec.save(self.partial_path)
         rec = self.rec
         rec.log("world", rr.Transform3D(scale=[1.0, -1.0, 1.0]), static=True)
-        rec.log("world/bodies/moving", rr.LineStrips2D.from_fields(colors=[_MOVING],
-                                                                   radii=[-1.5]), static=True)
-        rec.log("world/contacts", rr.Points2D.from_fields(colors=[_POINT], radii=[-3.0]),
-                static=True)
+        rec.log(
+            "world/bodies/moving",
+            rr.LineStrips2D.from_fields(colors=[_MOVING], radii=[-1.5]),
+            static=True,
+        )
+        rec.log(
+            "world/contacts", rr.Points2D.from_fields(colors=[_POINT], radii=[-3.0]), static=True
+        )
         rec.log("world/normals", rr.Arrows2D.from_fields(colors=[_NORMAL]), static=True)
         rec.log("world/push", rr.Arrows2D.from_fields(colors=[_PUSH]), static=True)
         rec.log("world/impulses", rr.Arrows2D.from_fields(colors=[_IMPULSE]), static=True)
-        rec.log("world/impulses", rr.AnyValues(impulse_scale_m_per_Ns=self.impulse_scale,
-                                               normal_length_m=self.normal_length), static=True)
-        rec.log("info", rr.TextDocument(
-            f"# ISAAC run: {scene.name}\n\n"
-            f"- physics frame: x right, y up (flipped once on `world`); units m, s, kg\n"
-            f"- impulse arrows (`world/impulses`): {self.impulse_scale:.6g} m per N s\n"
-            f"- normal arrows (`world/normals`): {self.normal_length:.6g} m long (unit normals,"
-            f" from body a to body b)\n"
-            f"- push arrows (`world/push`): true length (m), for body a and body b\n"
-            f"- exact float64 data: the MCAP log\n", media_type=rr.MediaType.MARKDOWN),
-            static=True)
+        rec.log(
+            "world/impulses",
+            rr.AnyValues(
+                impulse_scale_m_per_Ns=self.impulse_scale, normal_length_m=self.normal_length
+            ),
+            static=True,
+        )
+        rec.log(
+            "info",
+            rr.TextDocument(
+                f"# ISAAC run: {scene.name}\n\n"
+                f"- physics frame: x right, y up (flipped once on `world`); units m, s, kg\n"
+                f"- impulse arrows (`world/impulses`): {self.impulse_scale:.6g} m per N s\n"
+                f"- normal arrows (`world/normals`): {self.normal_length:.6g} m long (unit normals,"
+                f" from body a to body b)\n"
+                f"- push arrows (`world/push`): true length (m), for body a and body b\n"
+                f"- exact float64 data: the MCAP log\n",
+                media_type=rr.MediaType.MARKDOWN,
+            ),
+            static=True,
+        )
         if background:
             # two batches in flight at most (a few MB each); a third waits for the first
             self._queue = queue.Queue(maxsize=2)
-            self._thread = threading.Thread(target=self._work, name="isaac-rerun-sender",
-                                            daemon=True)
+            self._thread = threading.Thread(
+                target=self._work, name="isaac-rerun-sender", daemon=True
+            )
             self._thread.start()
 
     def _reset(self) -> None:
@@ -212,6 +263,7 @@ class RerunLogWriter:
     def _grow(self, strips: int, rows: int) -> None:
         """Room for ``strips`` outline points and ``rows`` contact rows (twice as many push
         arrows) in the batch, keeping what is buffered."""
+
         def grown(old, used, cap):
             new = np.empty((cap, 2), dtype=np.float32)
             new[:used] = old[:used]
@@ -242,8 +294,9 @@ class RerunLogWriter:
             i = j
         return np.concatenate(lengths), counts
 
-    def _outlines(self, angle: np.ndarray, position: np.ndarray,
-                  mask: np.ndarray) -> list[np.ndarray]:
+    def _outlines(
+        self, angle: np.ndarray, position: np.ndarray, mask: np.ndarray
+    ) -> list[np.ndarray]:
         """Closed float32 world outlines of the bodies in ``mask`` (one (c + 1, 2) array each),
         by the steps' kernel."""
         from recorder.rerun_batch import step_outlines
@@ -251,23 +304,54 @@ class RerunLogWriter:
         idx = np.flatnonzero(mask)
         sizes = self.vertex_count[idx] + 1
         points = np.empty((int(sizes.sum()), 2), dtype=np.float32)
-        step_outlines(np.ascontiguousarray(angle, dtype=np.float64),
-                      np.ascontiguousarray(position, dtype=np.float64), idx,
-                      self.vertices_local, self.vertex_count, points, 0)
+        step_outlines(
+            np.ascontiguousarray(angle, dtype=np.float64),
+            np.ascontiguousarray(position, dtype=np.float64),
+            idx,
+            self.vertices_local,
+            self.vertex_count,
+            points,
+            0,
+        )
         return np.split(points, np.cumsum(sizes)[:-1])
 
     def write(self, record: StepRecord, stats: dict | None = None) -> None:
         """Buffer one step (its `/stats` values without the hash, or None to leave them out);
         sent column-wise every ``batch`` steps."""
         c = record.contacts
-        values = (None if stats is None
-                  else np.array([float(stats[k]) for k in STAT_NAMES], dtype=np.float64))
-        self.append(record.step, record.time, record.position, record.angle, record.exists,
-                    c.point, c.normal, c.impulse, c.push_a, c.push_b, values)
+        values = (
+            None
+            if stats is None
+            else np.array([float(stats[k]) for k in STAT_NAMES], dtype=np.float64)
+        )
+        self.append(
+            record.step,
+            record.time,
+            record.position,
+            record.angle,
+            record.exists,
+            c.point,
+            c.normal,
+            c.impulse,
+            c.push_a,
+            c.push_b,
+            values,
+        )
 
-    def append(self, step: int, time: float, position: np.ndarray, angle: np.ndarray,
-               exists: np.ndarray, point: np.ndarray, normal: np.ndarray, impulse: np.ndarray,
-               push_a: np.ndarray, push_b: np.ndarray, stats: np.ndarray | None) -> None:
+    def append(
+        self,
+        step: int,
+        time: float,
+        position: np.ndarray,
+        angle: np.ndarray,
+        exists: np.ndarray,
+        point: np.ndarray,
+        normal: np.ndarray,
+        impulse: np.ndarray,
+        push_a: np.ndarray,
+        push_b: np.ndarray,
+        stats: np.ndarray | None,
+    ) -> None:
         """Buffer one step: what it draws is computed now (`recorder.rerun_batch.step_arrays`)
         into the batch's float32 buffers, so the arrays given may be reused once this returns.
 
@@ -283,9 +367,16 @@ class RerunLogWriter:
         if not self._static_done:
             concrete = self.concrete & exists
             if np.any(concrete):
-                rec.log("world/bodies/concrete", rr.LineStrips2D(
-                    self._outlines(angle, position, concrete), colors=[_CONCRETE], radii=[-1.5],
-                    labels=[self.names[k] for k in np.flatnonzero(concrete)]), static=True)
+                rec.log(
+                    "world/bodies/concrete",
+                    rr.LineStrips2D(
+                        self._outlines(angle, position, concrete),
+                        colors=[_CONCRETE],
+                        radii=[-1.5],
+                        labels=[self.names[k] for k in np.flatnonzero(concrete)],
+                    ),
+                    static=True,
+                )
             self._static_done = True
         moving = exists & self._not_concrete
         key = moving.tobytes()
@@ -293,8 +384,10 @@ class RerunLogWriter:
             # labels change only when a body enters or leaves: logged then, not every step
             rec.set_time("step", sequence=int(step))
             rec.set_time("sim_time", duration=float(time))
-            rec.log("world/bodies/moving", rr.LineStrips2D.from_fields(
-                labels=[self.names[k] for k in np.flatnonzero(moving)]))
+            rec.log(
+                "world/bodies/moving",
+                rr.LineStrips2D.from_fields(labels=[self.names[k] for k in np.flatnonzero(moving)]),
+            )
             self._last_labels_key = key
         if key != self._moving_key:
             self._moving_key = key
@@ -307,15 +400,35 @@ class RerunLogWriter:
         self._times.append(float(time))
         self._moving.append(self._moving_index)
         m = int(impulse.shape[0])
-        if (self._strip_at + self._strip_points > self._strip_cap
-                or self._row_at + m > self._row_cap):
+        if (
+            self._strip_at + self._strip_points > self._strip_cap
+            or self._row_at + m > self._row_cap
+        ):
             self._grow(self._strip_at + self._strip_points, self._row_at + m)
         push_at = self._push_at
         self._strip_at, self._push_at = step_arrays(
-            angle, position, self._moving_index, self.vertices_local, self.vertex_count,
-            self._strips, self._strip_at, point, normal, impulse, push_a, push_b,
-            self.normal_length, self.impulse_scale, self._points, self._normals,
-            self._impulses, self._row_at, self._push_pt, self._push_v, push_at)
+            angle,
+            position,
+            self._moving_index,
+            self.vertices_local,
+            self.vertex_count,
+            self._strips,
+            self._strip_at,
+            point,
+            normal,
+            impulse,
+            push_a,
+            push_b,
+            self.normal_length,
+            self.impulse_scale,
+            self._points,
+            self._normals,
+            self._impulses,
+            self._row_at,
+            self._push_pt,
+            self._push_v,
+            push_at,
+        )
         self._row_at += m
         self._counts[k] = m
         self._push_counts[k] = self._push_at - push_at
@@ -334,55 +447,136 @@ class RerunLogWriter:
         count = self._count
         lengths, strip_counts = self._strip_lengths()
         # what _send_batch uses: the batch's own arrays (new ones are made for the next)
-        job = (self._steps, self._times, self._strips[:self._strip_at], lengths, strip_counts,
-               self._points[:self._row_at], self._normals[:self._row_at],
-               self._impulses[:self._row_at], self._counts[:count].copy(),
-               self._push_pt[:self._push_at], self._push_v[:self._push_at],
-               self._push_counts[:count].copy(), self._stats[self._stats_rows],
-               self._stats_rows)
+        job = (
+            self._steps,
+            self._times,
+            self._strips[: self._strip_at],
+            lengths,
+            strip_counts,
+            self._points[: self._row_at],
+            self._normals[: self._row_at],
+            self._impulses[: self._row_at],
+            self._counts[:count].copy(),
+            self._push_pt[: self._push_at],
+            self._push_v[: self._push_at],
+            self._push_counts[:count].copy(),
+            self._stats[self._stats_rows],
+            self._stats_rows,
+        )
         self._reset()
         if self._queue is None:
             self._send_batch(*job)
         else:
             self._queue.put(job)
 
-    def _send_batch(self, steps, sim_times, strips, lengths, strip_counts, points, normals,
-                    impulses, counts, push_pt, push_v, push_counts, stats,
-                    stats_rows) -> None:
+    def _send_batch(
+        self,
+        steps,
+        sim_times,
+        strips,
+        lengths,
+        strip_counts,
+        points,
+        normals,
+        impulses,
+        counts,
+        push_pt,
+        push_v,
+        push_counts,
+        stats,
+        stats_rows,
+    ) -> None:
         """Send one batch (the arrays `_send` took): outlines, contacts, arrows, stats."""
         rec = self.rec
         count = len(steps)
-        times = [rr.TimeColumn("step", sequence=steps),
-                 rr.TimeColumn("sim_time", duration=sim_times)]
-        rec.send_columns("world/bodies/moving", indexes=times, columns=[_column(
-            rr.LineStrips2D.descriptor_strips(), rr.components.LineStrip2DBatch,
-            _strips_arrow(strips, lengths), strip_counts)])
+        times = [
+            rr.TimeColumn("step", sequence=steps),
+            rr.TimeColumn("sim_time", duration=sim_times),
+        ]
+        rec.send_columns(
+            "world/bodies/moving",
+            indexes=times,
+            columns=[
+                _column(
+                    rr.LineStrips2D.descriptor_strips(),
+                    rr.components.LineStrip2DBatch,
+                    _strips_arrow(strips, lengths),
+                    strip_counts,
+                )
+            ],
+        )
         points = _vec2(points)
-        rec.send_columns("world/contacts", indexes=times, columns=[_column(
-            rr.Points2D.descriptor_positions(), rr.components.Position2DBatch, points, counts)])
+        rec.send_columns(
+            "world/contacts",
+            indexes=times,
+            columns=[
+                _column(
+                    rr.Points2D.descriptor_positions(),
+                    rr.components.Position2DBatch,
+                    points,
+                    counts,
+                )
+            ],
+        )
         # the order Arrows2D.columns gives: vectors, then origins
         for entity, vectors in (("world/normals", normals), ("world/impulses", impulses)):
-            rec.send_columns(entity, indexes=times, columns=[
-                _column(rr.Arrows2D.descriptor_vectors(), rr.components.Vector2DBatch,
-                        _vec2(vectors), counts),
-                _column(rr.Arrows2D.descriptor_origins(), rr.components.Position2DBatch,
-                        points, counts)])
-        rec.send_columns("world/push", indexes=times, columns=[
-            _column(rr.Arrows2D.descriptor_vectors(), rr.components.Vector2DBatch,
-                    _vec2(push_v), push_counts),
-            _column(rr.Arrows2D.descriptor_origins(), rr.components.Position2DBatch,
-                    _vec2(push_pt), push_counts)])
+            rec.send_columns(
+                entity,
+                indexes=times,
+                columns=[
+                    _column(
+                        rr.Arrows2D.descriptor_vectors(),
+                        rr.components.Vector2DBatch,
+                        _vec2(vectors),
+                        counts,
+                    ),
+                    _column(
+                        rr.Arrows2D.descriptor_origins(),
+                        rr.components.Position2DBatch,
+                        points,
+                        counts,
+                    ),
+                ],
+            )
+        rec.send_columns(
+            "world/push",
+            indexes=times,
+            columns=[
+                _column(
+                    rr.Arrows2D.descriptor_vectors(),
+                    rr.components.Vector2DBatch,
+                    _vec2(push_v),
+                    push_counts,
+                ),
+                _column(
+                    rr.Arrows2D.descriptor_origins(),
+                    rr.components.Position2DBatch,
+                    _vec2(push_pt),
+                    push_counts,
+                ),
+            ],
+        )
         if stats_rows:
             stat_times = times
             if len(stats_rows) < count:  # some steps came without stats
-                stat_times = [rr.TimeColumn("step", sequence=[steps[k] for k in stats_rows]),
-                              rr.TimeColumn("sim_time",
-                                            duration=[sim_times[k] for k in stats_rows])]
+                stat_times = [
+                    rr.TimeColumn("step", sequence=[steps[k] for k in stats_rows]),
+                    rr.TimeColumn("sim_time", duration=[sim_times[k] for k in stats_rows]),
+                ]
             ones = np.ones(len(stats_rows), dtype=np.int64)
             for j, name in enumerate(STAT_NAMES):
-                rec.send_columns(f"stats/{name}", indexes=stat_times, columns=[_column(
-                    rr.Scalars.descriptor_scalars(), rr.components.ScalarBatch,
-                    pa.array(stats[:, j].copy()), ones)])
+                rec.send_columns(
+                    f"stats/{name}",
+                    indexes=stat_times,
+                    columns=[
+                        _column(
+                            rr.Scalars.descriptor_scalars(),
+                            rr.components.ScalarBatch,
+                            pa.array(stats[:, j].copy()),
+                            ones,
+                        )
+                    ],
+                )
 
     def _work(self) -> None:
         """The sender thread: batches in order; after a failure, it only drains the queue
@@ -418,8 +612,9 @@ class RerunLogWriter:
         self._check()
         self.rec.flush()
 
-    def close(self, *, complete: bool = True, stopped_at: int | None = None,
-              reason: str | None = None) -> str:
+    def close(
+        self, *, complete: bool = True, stopped_at: int | None = None, reason: str | None = None
+    ) -> str:
         """Send what is buffered, note an early stop in the recording, finish and rename."""
         if self._closed:
             return self.path
@@ -436,9 +631,13 @@ class RerunLogWriter:
             at = stopped_at if stopped_at is not None else last
             if at is not None:
                 self.rec.set_time("step", sequence=int(at))
-            self.rec.log("log", rr.TextLog(
-                f"run stopped at step {at}" + (f": {reason}" if reason else ""),
-                level=rr.TextLogLevel.WARN))
+            self.rec.log(
+                "log",
+                rr.TextLog(
+                    f"run stopped at step {at}" + (f": {reason}" if reason else ""),
+                    level=rr.TextLogLevel.WARN,
+                ),
+            )
         self.rec.flush()
         self.rec.disconnect()
         os.replace(self.partial_path, self.path)
@@ -465,8 +664,9 @@ def mcap_to_rrd(mcap_path: str, rrd_path: str, **kwargs) -> str:
     from recorder.reader import LogReader
 
     log = LogReader(mcap_path)
-    scene = SimpleNamespace(name=log.metadata.get("scene_name", "log"),
-                            world=SimpleNamespace(dt=log.dt))
+    scene = SimpleNamespace(
+        name=log.metadata.get("scene_name", "log"), world=SimpleNamespace(dt=log.dt)
+    )
     writer = RerunLogWriter(rrd_path, log.world, scene, **kwargs)
     try:
         for logged in log.steps():
@@ -476,5 +676,7 @@ def mcap_to_rrd(mcap_path: str, rrd_path: str, **kwargs) -> str:
         raise
     end = log.end or {}
     complete = log.closed_cleanly and end.get("complete") == "true"
-    return writer.close(complete=complete, reason=None if complete else end.get("reason")
-                        or "the log was not closed")
+    return writer.close(
+        complete=complete,
+        reason=None if complete else end.get("reason") or "the log was not closed",
+    )

@@ -31,8 +31,12 @@ MESSAGE_ENCODING = "protobuf"
 
 _F = descriptor_pb2.FieldDescriptorProto
 _TYPE = {
-    "double": _F.TYPE_DOUBLE, "uint64": _F.TYPE_UINT64, "uint32": _F.TYPE_UINT32,
-    "fixed32": _F.TYPE_FIXED32, "bool": _F.TYPE_BOOL, "string": _F.TYPE_STRING,
+    "double": _F.TYPE_DOUBLE,
+    "uint64": _F.TYPE_UINT64,
+    "uint32": _F.TYPE_UINT32,
+    "fixed32": _F.TYPE_FIXED32,
+    "bool": _F.TYPE_BOOL,
+    "string": _F.TYPE_STRING,
 }
 
 # (name, number, type, repeated, comment) per message; "message:Body" is a nested message type.
@@ -41,27 +45,27 @@ MESSAGES: dict[str, list[tuple[str, int, str, bool]]] = {
     "Body": [
         ("index", 1, "uint32", False),
         ("name", 2, "string", False),
-        ("vertices_local", 3, "double", True),   # x0, y0, x1, y1 ... (m, body frame, about the CoM)
-        ("mass", 4, "double", False),            # kg (area * density, also for concrete bodies)
-        ("inertia", 5, "double", False),         # kg m^2 about the centre of mass
+        ("vertices_local", 3, "double", True),  # x0, y0, x1, y1 ... (m, body frame, about the CoM)
+        ("mass", 4, "double", False),  # kg (area * density, also for concrete bodies)
+        ("inertia", 5, "double", False),  # kg m^2 about the centre of mass
         ("restitution", 6, "double", False),
-        ("concrete", 7, "bool", False),          # immovable (infinite mass and inertia)
-        ("exists", 8, "bool", False),            # whether it is in the scene at this step
-        ("friction", 9, "double", False),        # Coulomb coefficient
+        ("concrete", 7, "bool", False),  # immovable (infinite mass and inertia)
+        ("exists", 8, "bool", False),  # whether it is in the scene at this step
+        ("friction", 9, "double", False),  # Coulomb coefficient
     ],
     "World": [
         ("step", 1, "uint64", False),
-        ("time", 2, "double", False),            # s
-        ("bodies", 3, "message:Body", True),     # in body-index order
+        ("time", 2, "double", False),  # s
+        ("bodies", 3, "message:Body", True),  # in body-index order
     ],
     "Bodies": [
         ("step", 1, "uint64", False),
-        ("time", 2, "double", False),            # s, step * dt
-        ("position", 3, "double", True),         # (n, 2) flattened, m, world
-        ("angle", 4, "double", True),            # (n,) rad, counter-clockwise
-        ("velocity", 5, "double", True),         # (n, 2) flattened, m/s, world
-        ("angular_velocity", 6, "double", True), # (n,) rad/s
-        ("exists", 7, "bool", True),             # (n,)
+        ("time", 2, "double", False),  # s, step * dt
+        ("position", 3, "double", True),  # (n, 2) flattened, m, world
+        ("angle", 4, "double", True),  # (n,) rad, counter-clockwise
+        ("velocity", 5, "double", True),  # (n, 2) flattened, m/s, world
+        ("angular_velocity", 6, "double", True),  # (n,) rad/s
+        ("exists", 7, "bool", True),  # (n,)
     ],
     "Contacts": [
         ("step", 1, "uint64", False),
@@ -71,28 +75,28 @@ MESSAGES: dict[str, list[tuple[str, int, str, bool]]] = {
         ("b", 5, "fixed32", True),
         ("feature", 6, "fixed32", True),
         ("slot", 7, "fixed32", True),
-        ("point", 8, "double", True),            # (m, 2) flattened, m, world
-        ("normal", 9, "double", True),           # (m, 2) flattened, unit, from a to b
-        ("depth", 10, "double", True),           # (m,) m
-        ("push_a", 11, "double", True),          # (m, 2) flattened, m, world
-        ("push_b", 12, "double", True),          # (m, 2) flattened, m, world
-        ("impulse", 13, "double", True),         # (m,) N s, >= 0
-        ("tangent_impulse", 14, "double", True), # (m,) N s, signed along (-n_y, n_x)
-        ("restitution", 15, "double", True),     # (m,)
+        ("point", 8, "double", True),  # (m, 2) flattened, m, world
+        ("normal", 9, "double", True),  # (m, 2) flattened, unit, from a to b
+        ("depth", 10, "double", True),  # (m,) m
+        ("push_a", 11, "double", True),  # (m, 2) flattened, m, world
+        ("push_b", 12, "double", True),  # (m, 2) flattened, m, world
+        ("impulse", 13, "double", True),  # (m,) N s, >= 0
+        ("tangent_impulse", 14, "double", True),  # (m,) N s, signed along (-n_y, n_x)
+        ("restitution", 15, "double", True),  # (m,)
     ],
     "Stats": [
         ("step", 1, "uint64", False),
         ("time", 2, "double", False),
-        ("kinetic_energy", 3, "double", False),      # J
-        ("potential_energy", 4, "double", False),    # J, relative to the world origin
-        ("total_energy", 5, "double", False),        # J
-        ("linear_momentum_x", 6, "double", False),   # kg m/s
-        ("linear_momentum_y", 7, "double", False),   # kg m/s
-        ("angular_momentum", 8, "double", False),    # kg m^2/s about the origin
+        ("kinetic_energy", 3, "double", False),  # J
+        ("potential_energy", 4, "double", False),  # J, relative to the world origin
+        ("total_energy", 5, "double", False),  # J
+        ("linear_momentum_x", 6, "double", False),  # kg m/s
+        ("linear_momentum_y", 7, "double", False),  # kg m/s
+        ("angular_momentum", 8, "double", False),  # kg m^2/s about the origin
         ("contact_count", 9, "uint32", False),
-        ("max_depth", 10, "double", False),          # m (0 with no contact)
-        ("max_impulse", 11, "double", False),        # N s (0 with no contact)
-        ("state_hash", 12, "string", False),         # isaac.engine.diagnostics.state_hash, sha256 hex
+        ("max_depth", 10, "double", False),  # m (0 with no contact)
+        ("max_impulse", 11, "double", False),  # N s (0 with no contact)
+        ("state_hash", 12, "string", False),  # isaac.engine.diagnostics.state_hash, sha256 hex
     ],
 }
 
@@ -227,6 +231,7 @@ def packed(parts: list, number: int, array: np.ndarray, dtype) -> None:
 # ---------------------------------------------------------------------------------------------
 # decoding: a small wire-format parser driven by MESSAGES (fast path for the reader)
 
+
 class WireError(ValueError):
     """The bytes are not a valid message of the expected type."""
 
@@ -274,18 +279,18 @@ def decode(message: str, buf: bytes) -> dict:
         elif wt == _WT_I64:
             if pos + 8 > end:
                 raise WireError("truncated fixed64")
-            raw = ("8", buf[pos:pos + 8])
+            raw = ("8", buf[pos : pos + 8])
             pos += 8
         elif wt == _WT_I32:
             if pos + 4 > end:
                 raise WireError("truncated fixed32")
-            raw = ("4", buf[pos:pos + 4])
+            raw = ("4", buf[pos : pos + 4])
             pos += 4
         elif wt == _WT_LEN:
             length, pos = _read_varint(buf, pos)
             if pos + length > end:
                 raise WireError("truncated length-delimited field")
-            raw = ("L", buf[pos:pos + length])
+            raw = ("L", buf[pos : pos + length])
             pos += length
         else:
             raise WireError(f"unsupported wire type {wt}")
@@ -328,7 +333,7 @@ def decode(message: str, buf: bytes) -> dict:
             parts.setdefault(name, []).append(value)
         else:
             out[name] = value
-    for name, number, typ, repeated in MESSAGES[message]:
+    for name, _number, typ, repeated in MESSAGES[message]:
         if repeated:
             chunks = parts.get(name, [])
             if typ.startswith("message:"):

@@ -10,8 +10,16 @@ import numpy as np
 from isaac.engine.records import StepRecord, state_hash
 from isaac.errors import SimulationError
 
-_CONTACT_FLOATS = ("point", "normal", "depth", "push_a", "push_b", "impulse", "tangent_impulse",
-                   "restitution")
+_CONTACT_FLOATS = (
+    "point",
+    "normal",
+    "depth",
+    "push_a",
+    "push_b",
+    "impulse",
+    "tangent_impulse",
+    "restitution",
+)
 _BODY_FLOATS = ("position", "angle", "velocity", "angular_velocity")
 
 
@@ -68,7 +76,10 @@ def check_finite(names, record: StepRecord) -> None:
             name = str(names[k])
             raise SimulationError(
                 f"step {record.step}: body {name!r} (index {k}) has a non-finite {field}; "
-                f"the log keeps steps up to {record.step - 1}", step=record.step, body=name)
+                f"the log keeps steps up to {record.step - 1}",
+                step=record.step,
+                body=name,
+            )
     c = record.contacts
     for field in _CONTACT_FLOATS:
         row = _first_bad_row(getattr(c, field))
@@ -78,4 +89,6 @@ def check_finite(names, record: StepRecord) -> None:
             raise SimulationError(
                 f"step {record.step}: contact between {name!r} and {str(names[b])!r} has a "
                 f"non-finite {field}; the log keeps steps up to {record.step - 1}",
-                step=record.step, body=name)
+                step=record.step,
+                body=name,
+            )

@@ -52,8 +52,8 @@ from typing import NamedTuple
 
 import numpy as np
 
-from isaac.errors import LogError
 from isaac.engine.records import Contacts, StepRecord
+from isaac.errors import LogError
 
 # shared memory per writer, in frames of the scene's size, within RING_MIN..RING_MAX bytes,
 # mapped pre-faulted (a fresh page costs a fault in each process: writes over a cold 32 MiB
@@ -63,9 +63,17 @@ from isaac.engine.records import Contacts, StepRecord
 RING_FRAMES = {"mcap": 64, "rerun": 128}
 RING_MIN, RING_MAX = 4 << 20, 64 << 20
 
-STAT_KEYS = ("kinetic_energy", "potential_energy", "total_energy", "linear_momentum_x",
-             "linear_momentum_y", "angular_momentum", "contact_count", "max_depth",
-             "max_impulse")
+STAT_KEYS = (
+    "kinetic_energy",
+    "potential_energy",
+    "total_energy",
+    "linear_momentum_x",
+    "linear_momentum_y",
+    "angular_momentum",
+    "contact_count",
+    "max_depth",
+    "max_impulse",
+)
 
 # frames are announced to the child in batches: one wake-up per NOTIFY_EVERY steps, not per
 # step (a cross-CPU wake-up measured 10-20 us on this VM); a SIGKILLed parent loses at most
@@ -90,8 +98,9 @@ def _sizes(record: StepRecord) -> tuple[int, int, int]:
     """Bytes of `record`'s Bodies and Contacts messages, and of its frame (a multiple of 8)."""
     from recorder.pack import message_sizes
 
-    bodies, contacts = message_sizes(int(record.step), int(record.angle.shape[0]),
-                                     len(record.contacts))
+    bodies, contacts = message_sizes(
+        int(record.step), int(record.angle.shape[0]), len(record.contacts)
+    )
     return bodies, contacts, _HEAD.size + _pad8(bodies) + _pad8(contacts)
 
 
@@ -112,31 +121,40 @@ class RerunFrame(NamedTuple):
     the frame's arrays, valid while its ring slot is, in `RerunLogWriter.append`'s order."""
 
     step: int
-    time: float           # s
+    time: float  # s
     position: np.ndarray  # (n, 2) m, world
-    angle: np.ndarray     # (n,) rad, CCW
-    exists: np.ndarray    # (n,) bool
-    point: np.ndarray     # (m, 2) m, world
-    normal: np.ndarray    # (m, 2) unit, from a towards b
-    impulse: np.ndarray   # (m,) N s
-    push_a: np.ndarray    # (m, 2) m
-    push_b: np.ndarray    # (m, 2) m
-    stats: np.ndarray     # (9,) the /stats values in STAT_KEYS order
+    angle: np.ndarray  # (n,) rad, CCW
+    exists: np.ndarray  # (n,) bool
+    point: np.ndarray  # (m, 2) m, world
+    normal: np.ndarray  # (m, 2) unit, from a towards b
+    impulse: np.ndarray  # (m,) N s
+    push_a: np.ndarray  # (m, 2) m
+    push_b: np.ndarray  # (m, 2) m
+    stats: np.ndarray  # (9,) the /stats values in STAT_KEYS order
 
 
 def read_rerun_frame(buf: np.ndarray, at: int = 0) -> RerunFrame:
     """The Rerun frame at byte ``at`` (a multiple of 8) of ``buf`` (uint8), as views."""
     from recorder.pack import RERUN_HEAD, rerun_offsets
 
-    head = buf[at:at + 8 * RERUN_HEAD].view(np.int64)
+    head = buf[at : at + 8 * RERUN_HEAD].view(np.int64)
     step, n, m = int(head[0]), int(head[2]), int(head[3])
     o = rerun_offsets(n, m)
-    words = buf[at:at + 8 * o[-1]].view(np.float64)
-    pairs = lambda k, rows: words[o[k]:o[k] + 2 * rows].reshape(rows, 2)  # noqa: E731
-    return RerunFrame(step, float(words[1]), pairs(0, n), words[o[1]:o[1] + n],
-                      buf[at + 8 * o[2]:at + 8 * o[2] + n].view(np.bool_), pairs(3, m),
-                      pairs(4, m), words[o[5]:o[5] + m], pairs(6, m), pairs(7, m),
-                      words[4:RERUN_HEAD])
+    words = buf[at : at + 8 * o[-1]].view(np.float64)
+    pairs = lambda k, rows: words[o[k] : o[k] + 2 * rows].reshape(rows, 2)  # noqa: E731
+    return RerunFrame(
+        step,
+        float(words[1]),
+        pairs(0, n),
+        words[o[1] : o[1] + n],
+        buf[at + 8 * o[2] : at + 8 * o[2] + n].view(np.bool_),
+        pairs(3, m),
+        pairs(4, m),
+        words[o[5] : o[5] + m],
+        pairs(6, m),
+        pairs(7, m),
+        words[4:RERUN_HEAD],
+    )
 
 
 def pack(record: StepRecord, stats: dict) -> bytes:
@@ -145,15 +163,28 @@ def pack(record: StepRecord, stats: dict) -> bytes:
     from recorder.mcap_writer import encode_bodies, encode_contacts
 
     bodies, contacts = encode_bodies(record), encode_contacts(record)
-    head = _HEAD.pack(int(record.step), float(record.time), int(record.angle.shape[0]),
-                      len(record.contacts), *(float(stats[k]) for k in STAT_KEYS),
-                      len(bodies), len(contacts))
+    head = _HEAD.pack(
+        int(record.step),
+        float(record.time),
+        int(record.angle.shape[0]),
+        len(record.contacts),
+        *(float(stats[k]) for k in STAT_KEYS),
+        len(bodies),
+        len(contacts),
+    )
     pad = bytes(_pad8(len(bodies)) - len(bodies))
     return b"".join((head, bodies, pad, contacts, bytes(_pad8(len(contacts)) - len(contacts))))
 
 
-def pack_into(buf: np.ndarray, pos: int, record: StepRecord, model, gravity,
-              stats: dict | None = None, sizes: tuple[int, int] | None = None) -> bool:
+def pack_into(
+    buf: np.ndarray,
+    pos: int,
+    record: StepRecord,
+    model,
+    gravity,
+    stats: dict | None = None,
+    sizes: tuple[int, int] | None = None,
+) -> bool:
     """Encode `record`'s frame (`pack`'s bytes) at byte ``pos`` (a multiple of 8) of ``buf``
     (uint8, ``frame_size(record)`` bytes from ``pos`` at least) with the compiled
     `recorder.pack.pack_frame`; little-endian machines only.
@@ -169,14 +200,36 @@ def pack_into(buf: np.ndarray, pos: int, record: StepRecord, model, gravity,
     c = record.contacts
     i32 = np.int32
     bad, bodies_len, contacts_len = pack_frame(
-        buf, pos, int(record.step), float(record.time), int(record.angle.shape[0]), len(c),
-        _pad8(bodies_size), record.position, record.angle, record.velocity,
-        record.angular_velocity, np.asarray(record.exists, dtype=bool),
-        np.asarray(c.substep, dtype=i32), np.asarray(c.a, dtype=i32),
-        np.asarray(c.b, dtype=i32), np.asarray(c.feature, dtype=i32),
-        np.asarray(c.slot, dtype=i32), c.point, c.normal, c.depth, c.push_a, c.push_b,
-        c.impulse, c.tangent_impulse, c.restitution, model.mass, model.inertia,
-        model.concrete, *gravity)
+        buf,
+        pos,
+        int(record.step),
+        float(record.time),
+        int(record.angle.shape[0]),
+        len(c),
+        _pad8(bodies_size),
+        record.position,
+        record.angle,
+        record.velocity,
+        record.angular_velocity,
+        np.asarray(record.exists, dtype=bool),
+        np.asarray(c.substep, dtype=i32),
+        np.asarray(c.a, dtype=i32),
+        np.asarray(c.b, dtype=i32),
+        np.asarray(c.feature, dtype=i32),
+        np.asarray(c.slot, dtype=i32),
+        c.point,
+        c.normal,
+        c.depth,
+        c.push_a,
+        c.push_b,
+        c.impulse,
+        c.tangent_impulse,
+        c.restitution,
+        model.mass,
+        model.inertia,
+        model.concrete,
+        *gravity,
+    )
     if bad >= 0:
         return False
     assert (bodies_len, contacts_len) == (bodies_size, contacts_size)
@@ -188,7 +241,7 @@ def pack_into(buf: np.ndarray, pos: int, record: StepRecord, model, gravity,
 def _put_stats(buf: np.ndarray, pos: int, stats: dict) -> None:
     """The caller's /stats values over the computed ones, in the head of the frame at ``pos``
     (MCAP or Rerun frame: both keep them at _STATS_AT)."""
-    words = buf[pos + _STATS_AT:pos + _STATS_AT + 8 * len(STAT_KEYS)].view(np.float64)
+    words = buf[pos + _STATS_AT : pos + _STATS_AT + 8 * len(STAT_KEYS)].view(np.float64)
     words[:] = [float(stats[k]) for k in STAT_KEYS]
 
 
@@ -204,9 +257,9 @@ class Frame:
         self.stats["contact_count"] = int(self.stats["contact_count"])
         bodies_len, contacts_len = head[k:]
         view = memoryview(data)
-        self.bodies = view[_HEAD.size:_HEAD.size + bodies_len]
+        self.bodies = view[_HEAD.size : _HEAD.size + bodies_len]
         at = _HEAD.size + _pad8(bodies_len)
-        self.contacts = view[at:at + contacts_len]
+        self.contacts = view[at : at + contacts_len]
         self._fields: list[memoryview] | None = None
 
     def body_fields(self) -> list[memoryview]:
@@ -217,7 +270,7 @@ class Frame:
         return self._fields
 
     def state_hash(self) -> str:
-        """`isaac.engine.records.state_hash` of the step, from the message's bytes (the same bytes)."""
+        """`isaac.engine.records.state_hash` of the step, from the message's bytes (the same)."""
         h = hashlib.sha256()
         for part in self.body_fields():
             h.update(part)
@@ -225,8 +278,7 @@ class Frame:
 
     def exists(self) -> np.ndarray:
         flags = self.body_fields()[4]
-        return (np.frombuffer(flags, dtype=np.bool_) if len(flags)
-                else np.ones(self.n, dtype=bool))
+        return np.frombuffer(flags, dtype=np.bool_) if len(flags) else np.ones(self.n, dtype=bool)
 
     def record(self) -> StepRecord:
         """The step as a StepRecord: read-only views of one copy of the frame's values."""
@@ -235,25 +287,33 @@ class Frame:
         n, m = self.n, self.m
         data = bytes(self.bodies) + bytes(self.contacts)  # one copy: the ring slot is reused
         base = len(self.bodies)
-        spans = (_field_spans(self.bodies, 5)
-                 + [(start + base, size) for start, size in _field_spans(self.contacts, 13)])
+        spans = _field_spans(self.bodies, 5) + [
+            (start + base, size) for start, size in _field_spans(self.contacts, 13)
+        ]
 
         def values(k, dtype, shape):
             start, size = spans[k]
             if not size:
                 return np.zeros(shape, dtype=dtype)
-            return np.frombuffer(data, dtype=dtype, count=size // np.dtype(dtype).itemsize,
-                                 offset=start).reshape(shape)
+            return np.frombuffer(
+                data, dtype=dtype, count=size // np.dtype(dtype).itemsize, offset=start
+            ).reshape(shape)
 
         exists = values(4, np.bool_, (n,)) if spans[4][1] else np.ones(n, dtype=bool)
         c = {}
         for j, name in enumerate(CONTACT_FIELDS):
             pair = name in ("point", "normal", "push_a", "push_b")
             c[name] = values(5 + j, "<i4" if j < 5 else "<f8", (m, 2) if pair else (m,))
-        return StepRecord(step=self.step, time=self.time, position=values(0, "<f8", (n, 2)),
-                          angle=values(1, "<f8", (n,)), velocity=values(2, "<f8", (n, 2)),
-                          angular_velocity=values(3, "<f8", (n,)), exists=exists,
-                          contacts=Contacts(**c))
+        return StepRecord(
+            step=self.step,
+            time=self.time,
+            position=values(0, "<f8", (n, 2)),
+            angle=values(1, "<f8", (n,)),
+            velocity=values(2, "<f8", (n, 2)),
+            angular_velocity=values(3, "<f8", (n,)),
+            exists=exists,
+            contacts=Contacts(**c),
+        )
 
 
 def _field_spans(buf, count: int) -> list[tuple[int, int]]:
@@ -279,16 +339,25 @@ def _field_spans(buf, count: int) -> list[tuple[int, int]]:
 
 def _packed_fields(buf, count: int) -> list[memoryview]:
     """The payloads of fields 3 .. count + 2 of an encoded message, empty when left out."""
-    return [buf[start:start + size] for start, size in _field_spans(buf, count)]
+    return [buf[start : start + size] for start, size in _field_spans(buf, count)]
 
 
 def model_table(model) -> dict:
     """What a writer needs of the model, as plain lists and arrays (pickled to the child)."""
     return {
         "names": [str(x) for x in model.names],
-        **{key: np.asarray(getattr(model, key)) for key in (
-            "vertices_local", "vertex_count", "mass", "inertia", "restitution", "friction",
-            "concrete")},
+        **{
+            key: np.asarray(getattr(model, key))
+            for key in (
+                "vertices_local",
+                "vertex_count",
+                "mass",
+                "inertia",
+                "restitution",
+                "friction",
+                "concrete",
+            )
+        },
     }
 
 
@@ -361,8 +430,15 @@ class WriterProcess:
     cpus: the CPUs the child may run on (`plan_cpus`); None: wherever the scheduler likes.
     """
 
-    def __init__(self, kind: str, path: str, config: dict, *, ring_bytes: int | None = None,
-                 cpus: set[int] | None = None):
+    def __init__(
+        self,
+        kind: str,
+        path: str,
+        config: dict,
+        *,
+        ring_bytes: int | None = None,
+        cpus: set[int] | None = None,
+    ):
         self.path = str(path)
         self.partial_path = self.path + ".partial"
         self.kind = kind
@@ -393,10 +469,22 @@ class WriterProcess:
         env["PYTHONPATH"] = os.pathsep.join(p for p in (root, env.get("PYTHONPATH")) if p)
         try:
             self.proc = subprocess.Popen(
-                [sys.executable, "-m", "recorder.writer_process", str(cmd_r), str(rep_w),
-                 str(ring_fd), str(ring_bytes)],
-                pass_fds=(cmd_r, rep_w, ring_fd), stdin=subprocess.DEVNULL,
-                stdout=subprocess.DEVNULL, stderr=self._stderr, env=env, process_group=0)
+                [
+                    sys.executable,
+                    "-m",
+                    "recorder.writer_process",
+                    str(cmd_r),
+                    str(rep_w),
+                    str(ring_fd),
+                    str(ring_bytes),
+                ],
+                pass_fds=(cmd_r, rep_w, ring_fd),
+                stdin=subprocess.DEVNULL,
+                stdout=subprocess.DEVNULL,
+                stderr=self._stderr,
+                env=env,
+                process_group=0,
+            )
             if cpus:
                 try:
                     os.sched_setaffinity(self.proc.pid, cpus)
@@ -412,16 +500,19 @@ class WriterProcess:
         self._stats_model = _Namespace(
             mass=np.ascontiguousarray(model["mass"], dtype=np.float64),
             inertia=np.ascontiguousarray(model["inertia"], dtype=np.float64),
-            concrete=np.ascontiguousarray(model["concrete"], dtype=bool))
+            concrete=np.ascontiguousarray(model["concrete"], dtype=bool),
+        )
         self._gravity = tuple(float(g) for g in config["gravity"])
         # the compiled encoder writes the host's byte order: little-endian only
         self._compiled = sys.byteorder == "little"
         if kind == "rerun":  # native byte order: both ends are on this machine
             from recorder.pack import pack_rerun, rerun_offsets
+
             self._pack_rerun, self._rerun_offsets = pack_rerun, rerun_offsets
         os.set_blocking(self._rep, False)
-        payload = pickle.dumps({"kind": kind, "path": self.path, **config},
-                               protocol=pickle.HIGHEST_PROTOCOL)
+        payload = pickle.dumps(
+            {"kind": kind, "path": self.path, **config}, protocol=pickle.HIGHEST_PROTOCOL
+        )
         self._send(b"C", len(payload), payload=payload)
 
     # -- parent side -------------------------------------------------------------------------
@@ -478,11 +569,32 @@ class WriterProcess:
             (pos, end), buf = self._reserve(size), self._ring_u8
         c = record.contacts
         model = self._stats_model
-        if self._pack_rerun(buf, pos, int(record.step), float(record.time), record.position,
-                            record.angle, record.exists, record.velocity,
-                            record.angular_velocity, c.point, c.normal, c.depth, c.push_a,
-                            c.push_b, c.impulse, c.tangent_impulse, c.restitution, model.mass,
-                            model.inertia, model.concrete, *self._gravity) >= 0:
+        if (
+            self._pack_rerun(
+                buf,
+                pos,
+                int(record.step),
+                float(record.time),
+                record.position,
+                record.angle,
+                record.exists,
+                record.velocity,
+                record.angular_velocity,
+                c.point,
+                c.normal,
+                c.depth,
+                c.push_a,
+                c.push_b,
+                c.impulse,
+                c.tangent_impulse,
+                c.restitution,
+                model.mass,
+                model.inertia,
+                model.concrete,
+                *self._gravity,
+            )
+            >= 0
+        ):
             return False
         if stats is not None:
             _put_stats(buf, pos, stats)
@@ -516,12 +628,25 @@ class WriterProcess:
             self._send_raw(data)
         self._pump(block=False)
 
-    def _compiled_pack(self, pos: int, record: StepRecord, stats: dict | None,
-                       bodies_size: int | None = None, contacts_size: int | None = None) -> bool:
+    def _compiled_pack(
+        self,
+        pos: int,
+        record: StepRecord,
+        stats: dict | None,
+        bodies_size: int | None = None,
+        contacts_size: int | None = None,
+    ) -> bool:
         """Encode the frame at ``pos`` of the ring (its messages' sizes from `_sizes`, given by
         `write`, which needed them first); False (frame unusable) on NaN/infinity."""
-        return pack_into(self._ring_u8, pos, record, self._stats_model, self._gravity, stats,
-                         None if bodies_size is None else (bodies_size, contacts_size))
+        return pack_into(
+            self._ring_u8,
+            pos,
+            record,
+            self._stats_model,
+            self._gravity,
+            stats,
+            None if bodies_size is None else (bodies_size, contacts_size),
+        )
 
     def wait_ready(self) -> None:
         """Block until the child has started and opened its file (start-up is ~0.3-1 s)."""
@@ -537,16 +662,18 @@ class WriterProcess:
         while self._synced < self._syncs_sent:
             self._pump(block=True)
 
-    def close(self, *, complete: bool = True, stopped_at: int | None = None,
-              reason: str | None = None) -> str:
+    def close(
+        self, *, complete: bool = True, stopped_at: int | None = None, reason: str | None = None
+    ) -> str:
         """Finish the file in the child (every step sent is written) and rename it."""
         if self._finished:
             return self.path
         self._finished = True
         try:
             self._notify()
-            args = json.dumps({"complete": complete, "stopped_at": stopped_at,
-                               "reason": reason}).encode()
+            args = json.dumps(
+                {"complete": complete, "stopped_at": stopped_at, "reason": reason}
+            ).encode()
             self._send(b"Z", len(args), payload=args)
             while self._closed_reply is None:
                 self._pump(block=True)
@@ -571,10 +698,12 @@ class WriterProcess:
         data = memoryview(data)
         try:
             while data:
-                data = data[os.write(self._cmd, data):]
+                data = data[os.write(self._cmd, data) :]
         except BrokenPipeError:
             self._pump(block=True)  # raises with the child's own message
-            raise LogError(f"writing {self.partial_path} failed: the writer process is gone")
+            raise LogError(
+                f"writing {self.partial_path} failed: the writer process is gone"
+            ) from None
 
     def _pump(self, *, block: bool) -> None:
         """Read the child's replies; with ``block``, wait for at least one. Raises LogError
@@ -594,8 +723,10 @@ class WriterProcess:
             if self._failed is not None:
                 raise LogError(f"writing {self.partial_path} failed: {self._failed}")
             if self._eof and self._closed_reply is None:
-                raise LogError(f"writing {self.partial_path} failed: the writer process "
-                               f"stopped{self._child_reason()}")
+                raise LogError(
+                    f"writing {self.partial_path} failed: the writer process "
+                    f"stopped{self._child_reason()}"
+                )
             if got or not block:
                 return
 
@@ -606,7 +737,7 @@ class WriterProcess:
             body_len = value if kind in (b"D", b"E") else 0
             if len(buf) - pos - _REPLY.size < body_len:
                 break
-            body = bytes(buf[pos + _REPLY.size: pos + _REPLY.size + body_len])
+            body = bytes(buf[pos + _REPLY.size : pos + _REPLY.size + body_len])
             pos += _REPLY.size + body_len
             got = True
             if kind == b"R":
@@ -630,8 +761,9 @@ class WriterProcess:
             except subprocess.TimeoutExpired:
                 return ""
         self._stderr.seek(0)
-        lines = [ln for ln in self._stderr.read().decode("utf-8", "replace").splitlines()
-                 if ln.strip()]
+        lines = [
+            ln for ln in self._stderr.read().decode("utf-8", "replace").splitlines() if ln.strip()
+        ]
         last = f": {lines[-1].strip()}" if lines else ""
         return f" (exit code {code}){last}"
 
@@ -672,14 +804,19 @@ class _FrameWriter:
         if length is None:
             self._write_frame(Frame(data))
         else:
-            with memoryview(data)[at:at + length] as view:
+            with memoryview(data)[at : at + length] as view:
                 self._write_frame(Frame(view))
 
     def _write_frame(self, frame: Frame) -> None:
         if self.encoded:
-            self.writer.write_messages(frame.step, frame.time, frame.exists(), frame.bodies,
-                                       frame.contacts,
-                                       {**frame.stats, "state_hash": frame.state_hash()})
+            self.writer.write_messages(
+                frame.step,
+                frame.time,
+                frame.exists(),
+                frame.bodies,
+                frame.contacts,
+                {**frame.stats, "state_hash": frame.state_hash()},
+            )
         else:
             self.writer.write(frame.record(), frame.stats)
 
@@ -697,20 +834,30 @@ def _make_bare_writer(config: dict):
     scene = _Namespace(name=config["scene"]["name"], world=_Namespace(dt=config["scene"]["dt"]))
     if config["kind"] == "mcap":
         from recorder.mcap_writer import McapLogWriter
+
         scene_encoder = None
         if config.get("foxglove"):
             from recorder.foxglove import SceneEncoder
+
             scene_encoder = SceneEncoder(model, **config["foxglove"])
-        return McapLogWriter(config["path"], model, scene, config["scene_text"],
-                             flush_every=config["flush_every"],
-                             compression=config["compression"], foxglove=scene_encoder,
-                             metadata=config["metadata"])
+        return McapLogWriter(
+            config["path"],
+            model,
+            scene,
+            config["scene_text"],
+            flush_every=config["flush_every"],
+            compression=config["compression"],
+            foxglove=scene_encoder,
+            metadata=config["metadata"],
+        )
     from recorder.rerun_writer import RerunLogWriter
+
     # each batch sent from a thread: the steps behind it are taken meanwhile (a batch's
     # send_columns took 2-12 ms on the 500-body pile, and the run waited whenever it caught up)
     sys.setswitchinterval(0.0005)  # and the GIL comes back to this thread within 0.5 ms
-    return RerunLogWriter(config["path"], model, scene, impulse_scale=config["impulse_scale"],
-                          background=True)
+    return RerunLogWriter(
+        config["path"], model, scene, impulse_scale=config["impulse_scale"], background=True
+    )
 
 
 POLL_S = 0.001  # the writer process looks for commands every millisecond while it has none
@@ -751,6 +898,7 @@ def child_main(argv: list[str]) -> int:
     """The child: read commands, write the log; see the module docstring for the protocol."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     from isaac.tuning import reuse_large_buffers
+
     reuse_large_buffers()  # a step's messages are 100 kB and more (see isaac.tuning)
     cmd_fd, rep_fd, ring_fd, ring_bytes = (int(x) for x in argv)
     commands = _PolledReader(cmd_fd)
@@ -761,7 +909,7 @@ def child_main(argv: list[str]) -> int:
     def reply(kind: bytes, value: int = 0, body: bytes = b"") -> None:
         data = memoryview(_REPLY.pack(kind, value) + body)
         while data:
-            data = data[os.write(rep_fd, data):]
+            data = data[os.write(rep_fd, data) :]
 
     writer = None
     try:

@@ -27,25 +27,38 @@ import json
 import struct
 import sys
 import time
+from collections.abc import Callable, Iterator
 from dataclasses import asdict
-from typing import Callable, Iterator
 
 import numpy as np
 
-from isaac.errors import LogError, SimulationError
 from isaac.engine.records import StepRecord
+from isaac.errors import LogError, SimulationError
 from isaac.scene import Scene, load_scene_text
 from recorder import schema as S
-from recorder.mcap_writer import (build_metadata, encode_bodies, encode_contacts, encode_stats,
-                                  encode_world)
+from recorder.mcap_writer import (
+    build_metadata,
+    encode_bodies,
+    encode_contacts,
+    encode_stats,
+    encode_world,
+)
 from recorder.reader import record_from_messages
 from recorder.stats import compute_stats
 from replay.reader import Prefetch, RawLog, RawStep
 from replay.report import DEFAULT_MAX_REPORTED, Divergence, Report
 
 # metadata keys whose difference voids the promise of bit-identical results
-VERSION_KEYS = ("engine_version", "python_version", "python_implementation", "numpy_version",
-                "numba_version", "machine", "cpu", "byteorder")
+VERSION_KEYS = (
+    "engine_version",
+    "python_version",
+    "python_implementation",
+    "numpy_version",
+    "numba_version",
+    "machine",
+    "cpu",
+    "byteorder",
+)
 SUGGESTED_TOLERANCE = 1e-9
 
 # per-row 2-vector fields, flattened x0, y0, x1, y1 ... in the log
@@ -98,11 +111,13 @@ def ulp_distances(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 # ---------------------------------------------------------------------------------------------
 # locating a difference inside two decoded messages
 
+
 def _float_mismatch(la: np.ndarray, ra: np.ndarray, tolerance: float | None) -> np.ndarray:
     """Mask of elements that differ: any bit (bitwise), or beyond tolerance."""
     if tolerance is None:
-        return (np.ascontiguousarray(la, dtype="<f8").view(np.uint64)
-                != np.ascontiguousarray(ra, dtype="<f8").view(np.uint64))
+        return np.ascontiguousarray(la, dtype="<f8").view(np.uint64) != np.ascontiguousarray(
+            ra, dtype="<f8"
+        ).view(np.uint64)
     with np.errstate(invalid="ignore", over="ignore"):
         close = np.abs(la - ra) <= tolerance + tolerance * np.abs(la)
     same_nan = np.isnan(la) & np.isnan(ra)
@@ -130,13 +145,22 @@ class _Finder:
         la = np.atleast_1d(np.asarray(la))
         ra = np.atleast_1d(np.asarray(ra))
         if la.shape != ra.shape:
-            self._add(Divergence(self.step, self.channel, "count", field=name,
-                                 logged=int(la.size), replayed=int(ra.size)), 1)
+            self._add(
+                Divergence(
+                    self.step,
+                    self.channel,
+                    "count",
+                    field=name,
+                    logged=int(la.size),
+                    replayed=int(ra.size),
+                ),
+                1,
+            )
             return
         if is_float:
             la = la.astype(np.float64, copy=False)
             ra = ra.astype(np.float64, copy=False)
-            bits = (la.view(np.uint64) != ra.view(np.uint64))
+            bits = la.view(np.uint64) != ra.view(np.uint64)
             n_bits = int(np.count_nonzero(bits))
             if not n_bits:
                 return
@@ -156,8 +180,16 @@ class _Finder:
         if name in _VECTOR_FIELDS:
             label = f"{name}.{'xy'[i % 2]}"
             i //= 2
-        d = Divergence(self.step, self.channel, "value", field=label, logged=lv, replayed=rv,
-                       ulps=ulp_distance(lv, rv) if is_float else None, **where(i))
+        d = Divergence(
+            self.step,
+            self.channel,
+            "value",
+            field=label,
+            logged=lv,
+            replayed=rv,
+            ulps=ulp_distance(lv, rv) if is_float else None,
+            **where(i),
+        )
         self._add(d, int(idx.size))
 
     def scalar(self, name: str, lv, rv, *, is_float: bool) -> None:
@@ -167,8 +199,9 @@ class _Finder:
             if name == "state_hash" and self.tolerance is not None:
                 return  # a hash cannot be close: in tolerance mode it is not compared
             self.bit_differences += 1
-            self._add(Divergence(self.step, self.channel, "value", field=name, logged=lv,
-                                 replayed=rv), 1)
+            self._add(
+                Divergence(self.step, self.channel, "value", field=name, logged=lv, replayed=rv), 1
+            )
 
     def _add(self, d: Divergence, n: int) -> None:
         self.count += n
@@ -182,8 +215,14 @@ class _Finder:
         return self.first
 
 
-def locate(topic: str, step: int, logged: bytes, replayed: bytes, names: list,
-           tolerance: float | None = None) -> tuple[Divergence | None, int | None]:
+def locate(
+    topic: str,
+    step: int,
+    logged: bytes,
+    replayed: bytes,
+    names: list,
+    tolerance: float | None = None,
+) -> tuple[Divergence | None, int | None]:
     """Decode two payloads of ``topic`` that differ in bytes and find where.
 
     Returns (the first difference beyond the tolerance or None, the largest ULP distance seen).
@@ -193,8 +232,9 @@ def locate(topic: str, step: int, logged: bytes, replayed: bytes, names: list,
     try:
         dl = S.decode(message, logged)
     except (S.WireError, UnicodeDecodeError) as exc:
-        return Divergence(step, topic, "error", detail=f"the logged message does not decode "
-                          f"({exc})"), None
+        return Divergence(
+            step, topic, "error", detail=f"the logged message does not decode ({exc})"
+        ), None
     dr = S.decode(message, replayed)
     f = _Finder(step, topic, tolerance)
 
@@ -232,12 +272,22 @@ def locate(topic: str, step: int, logged: bytes, replayed: bytes, names: list,
             off = np.flatnonzero((keys_l != keys_r).any(axis=0))
             i = int(off[0]) if off.size else m
             where = row(i)["contact"] if i < ml else None
-            detail = (f"the rows agree up to row {i - 1}" if i > 0 else "row 0 already differs")
+            detail = f"the rows agree up to row {i - 1}" if i > 0 else "row 0 already differs"
             if where is not None:
-                detail += (f"; logged row {i} is {where.get('a_name', where['a'])!r}-"
-                           f"{where.get('b_name', where['b'])!r} slot {where['slot']}")
-            return Divergence(step, topic, "count", field="contacts", logged=ml, replayed=mr,
-                              contact=where, detail=detail), None
+                detail += (
+                    f"; logged row {i} is {where.get('a_name', where['a'])!r}-"
+                    f"{where.get('b_name', where['b'])!r} slot {where['slot']}"
+                )
+            return Divergence(
+                step,
+                topic,
+                "count",
+                field="contacts",
+                logged=ml,
+                replayed=mr,
+                contact=where,
+                detail=detail,
+            ), None
         for name, _num, typ, repeated in spec:
             if repeated:
                 f.array(name, dl[name], dr[name], is_float=typ == "double", where=row)
@@ -251,29 +301,44 @@ def locate(topic: str, step: int, logged: bytes, replayed: bytes, names: list,
         f.scalar("time", dl["time"], dr["time"], is_float=True)
         bl, br = dl["bodies"], dr["bodies"]
         if len(bl) != len(br):
-            return Divergence(step, topic, "count", field="bodies", logged=len(bl),
-                              replayed=len(br)), None
+            return Divergence(
+                step, topic, "count", field="bodies", logged=len(bl), replayed=len(br)
+            ), None
         for i, (a, b) in enumerate(zip(bl, br)):
             for name, _num, typ, repeated in S.MESSAGES["Body"]:
                 if repeated:
                     f.array(name, a[name], b[name], is_float=True, where=lambda _j, i=i: body(i))
-                elif a[name] != b[name] or (typ == "double" and
-                                            ulp_distance(a[name], b[name]) != 0):
+                elif a[name] != b[name] or (
+                    typ == "double" and ulp_distance(a[name], b[name]) != 0
+                ):
                     if typ == "double":
-                        f.array(name, a[name], b[name], is_float=True,
-                                where=lambda _j, i=i: body(i))
+                        f.array(
+                            name, a[name], b[name], is_float=True, where=lambda _j, i=i: body(i)
+                        )
                     else:
                         f.bit_differences += 1
-                        f._add(Divergence(step, topic, "value", field=name, logged=a[name],
-                                          replayed=b[name], **body(i)), 1)
+                        f._add(
+                            Divergence(
+                                step,
+                                topic,
+                                "value",
+                                field=name,
+                                logged=a[name],
+                                replayed=b[name],
+                                **body(i),
+                            ),
+                            1,
+                        )
     return f.result(), f.max_ulps
 
 
 # ---------------------------------------------------------------------------------------------
 # checks on the log's header
 
-def versions_note(logged: dict, here: dict, *, what: str = "here",
-                  suggest: bool = True) -> str | None:
+
+def versions_note(
+    logged: dict, here: dict, *, what: str = "here", suggest: bool = True
+) -> str | None:
     """A note when the versions or the machine differ (None when they all agree)."""
     diffs = []
     for key in VERSION_KEYS:
@@ -288,8 +353,10 @@ def versions_note(logged: dict, here: dict, *, what: str = "here",
         return None
     text = "versions or platform differ (" + "; ".join(diffs) + ")"
     if suggest:
-        text += (": bit-identical results are promised only for one version on one machine; "
-                 f"compare with --tolerance {SUGGESTED_TOLERANCE:g} instead")
+        text += (
+            ": bit-identical results are promised only for one version on one machine; "
+            f"compare with --tolerance {SUGGESTED_TOLERANCE:g} instead"
+        )
     return text
 
 
@@ -305,17 +372,21 @@ def load_embedded_scene(log: RawLog) -> tuple[Scene, list[str]]:
     if recorded is None:
         raise LogError(f"{log.path}: the log's metadata has no scene_sha256")
     if recorded != actual:
-        raise LogError(f"{log.path}: the embedded scene does not match its recorded sha256 "
-                       f"(the log was altered or is corrupt)")
+        raise LogError(
+            f"{log.path}: the embedded scene does not match its recorded sha256 "
+            f"(the log was altered or is corrupt)"
+        )
     scene = load_scene_text(text, source=f"{log.path}:scene.yaml")
     notes = []
     ours = json.loads(json.dumps(asdict(scene.world), sort_keys=True))
     theirs = log.header.settings
     changed = sorted(k for k in set(ours) | set(theirs) if ours.get(k) != theirs.get(k))
     if changed:
-        notes.append("this version reads the embedded scene's world settings differently from "
-                     "the log's recorded settings: " + ", ".join(
-                         f"{k} (log {theirs.get(k)!r}, now {ours.get(k)!r})" for k in changed))
+        notes.append(
+            "this version reads the embedded scene's world settings differently from "
+            "the log's recorded settings: "
+            + ", ".join(f"{k} (log {theirs.get(k)!r}, now {ours.get(k)!r})" for k in changed)
+        )
     return scene, notes
 
 
@@ -327,8 +398,10 @@ def _truncation(log: RawLog, last: int | None, report: Report) -> None:
         # a finished file that cannot be read to its end: corrupt, not cut
         report.truncated = True
         logged_last = (end or {}).get("last_step") or "?"
-        report.truncated_detail = (f"the log is damaged: reading stopped at {log.damage}; "
-                                   f"replayed up to {last_text} of the {logged_last} it holds")
+        report.truncated_detail = (
+            f"the log is damaged: reading stopped at {log.damage}; "
+            f"replayed up to {last_text} of the {logged_last} it holds"
+        )
     elif not log.closed_cleanly or end is None:
         why = "the log was not closed (the run crashed or was killed, or the file was cut)"
         if log.damage:
@@ -339,12 +412,15 @@ def _truncation(log: RawLog, last: int | None, report: Report) -> None:
             report.truncated_detail += f" (step {log.incomplete_tail} was only partly written)"
     elif end.get("complete") != "true":
         reason = end.get("reason") or "no reason given"
-        report.notes.append(f"the logged run did not finish: stopped at step "
-                            f"{end.get('stopped_at') or '?'} ({reason})")
+        report.notes.append(
+            f"the logged run did not finish: stopped at step "
+            f"{end.get('stopped_at') or '?'} ({reason})"
+        )
 
 
 # ---------------------------------------------------------------------------------------------
 # replay
+
 
 def _logged_record(raw: RawStep) -> StepRecord:
     try:
@@ -355,9 +431,15 @@ def _logged_record(raw: RawStep) -> StepRecord:
         raise LogError(f"step {raw.step}: the logged state does not decode ({exc})") from None
 
 
-def _compare_step(raw: RawStep, ours: dict, names: list, tolerance: float | None,
-                  report: Report, *, sides: tuple[str, str] = ("logged", "replayed")
-                  ) -> tuple[bool, bool]:
+def _compare_step(
+    raw: RawStep,
+    ours: dict,
+    names: list,
+    tolerance: float | None,
+    report: Report,
+    *,
+    sides: tuple[str, str] = ("logged", "replayed"),
+) -> tuple[bool, bool]:
     """Compare one step's payloads. Returns (bytes all equal, beyond tolerance somewhere)."""
     found = []
     equal = True
@@ -369,17 +451,28 @@ def _compare_step(raw: RawStep, ours: dict, names: list, tolerance: float | None
         if mine is None or theirs is None:
             equal = False
             side = f"{sides[0]} only" if mine is None else f"{sides[1]} only"
-            found.append(Divergence(raw.step, topic, "missing", detail=(
-                f"a {topic} message is {side} (the set of existing bodies changed on one side "
-                f"only)" if topic == "/world" else f"a {topic} message is {side}")))
+            found.append(
+                Divergence(
+                    raw.step,
+                    topic,
+                    "missing",
+                    detail=(
+                        f"a {topic} message is {side} (the set of existing bodies changed on one "
+                        f"side only)"
+                        if topic == "/world"
+                        else f"a {topic} message is {side}"
+                    ),
+                )
+            )
             continue
         if mine == theirs:
             continue
         equal = False
         d, max_ulps = locate(topic, raw.step, theirs, mine, names, tolerance)
         if max_ulps is not None:
-            report.max_ulps_seen = (max_ulps if report.max_ulps_seen is None
-                                    else max(report.max_ulps_seen, max_ulps))
+            report.max_ulps_seen = (
+                max_ulps if report.max_ulps_seen is None else max(report.max_ulps_seen, max_ulps)
+            )
         if d is not None:
             found.append(d)
     report.add(found)
@@ -407,7 +500,8 @@ class StepEncoder:
         self._sums_model = SimpleNamespace(
             mass=np.ascontiguousarray(model.mass, dtype=np.float64),
             inertia=np.ascontiguousarray(model.inertia, dtype=np.float64),
-            concrete=np.ascontiguousarray(model.concrete, dtype=bool))
+            concrete=np.ascontiguousarray(model.concrete, dtype=bool),
+        )
         self._compiled = sys.byteorder == "little"
         self._buf = np.zeros(0, dtype=np.uint8)
 
@@ -423,17 +517,30 @@ class StepEncoder:
                 stats = {**frame.stats, "state_hash": frame.state_hash()}
                 # bytes, not views of the buffer: the next step overwrites it, and
                 # memoryview == bytes compares item by item (30x slower)
-                return {"/bodies": bytes(frame.bodies), "/contacts": bytes(frame.contacts),
-                        "/stats": encode_stats(record.step, record.time, stats)}
-        return {"/bodies": encode_bodies(record), "/contacts": encode_contacts(record),
-                "/stats": encode_stats(record.step, record.time,
-                                       compute_stats(self.model, self.gravity, record))}
+                return {
+                    "/bodies": bytes(frame.bodies),
+                    "/contacts": bytes(frame.contacts),
+                    "/stats": encode_stats(record.step, record.time, stats),
+                }
+        return {
+            "/bodies": encode_bodies(record),
+            "/contacts": encode_contacts(record),
+            "/stats": encode_stats(
+                record.step, record.time, compute_stats(self.model, self.gravity, record)
+            ),
+        }
 
 
-def replay_log(path: str, *, from_step: int | None = None, to_step: int | None = None,
-               tolerance: float | None = None, all_steps: bool = False,
-               max_reported: int = DEFAULT_MAX_REPORTED,
-               on_step: Callable[[int], None] | None = None) -> Report:
+def replay_log(
+    path: str,
+    *,
+    from_step: int | None = None,
+    to_step: int | None = None,
+    tolerance: float | None = None,
+    all_steps: bool = False,
+    max_reported: int = DEFAULT_MAX_REPORTED,
+    on_step: Callable[[int], None] | None = None,
+) -> Report:
     """Re-simulate the log at ``path`` from its embedded scene and compare every step.
 
     from_step: start from the state logged at this step (default: the scene's step 0).
@@ -458,16 +565,17 @@ def replay_log(path: str, *, from_step: int | None = None, to_step: int | None =
     names = list(model.names)
     gravity = tuple(float(g) for g in scene.world.gravity)
     encoder = StepEncoder(model, gravity)
-    report = Report(mode="replay", logs=[str(path)], tolerance=tolerance,
-                    max_reported=max_reported)
+    report = Report(mode="replay", logs=[str(path)], tolerance=tolerance, max_reported=max_reported)
     report.notes.extend(notes)
     here = build_metadata(scene, "", len(names))
     note = versions_note(log.metadata, here, suggest=tolerance is None)
     if note:
         report.notes.append(note)
     if log.metadata.get("bodies") not in (None, str(len(names))):
-        report.notes.append(f"the log's metadata says {log.metadata['bodies']} bodies; the "
-                            f"embedded scene has {len(names)}")
+        report.notes.append(
+            f"the log's metadata says {log.metadata['bodies']} bodies; the "
+            f"embedded scene has {len(names)}"
+        )
 
     started = time.perf_counter()
     timed_from: float | None = None
@@ -483,11 +591,14 @@ def replay_log(path: str, *, from_step: int | None = None, to_step: int | None =
             if report.first_step is None and (from_step is not None or raw.step != 0):
                 # a keyframe: start from the logged state (nothing to compare at this step)
                 if from_step is not None and raw.step != from_step:
-                    raise LogError(f"{path}: step {from_step} is not in the log (the next "
-                                   f"complete step is {raw.step})")
+                    raise LogError(
+                        f"{path}: step {from_step} is not in the log (the next "
+                        f"complete step is {raw.step})"
+                    )
                 if from_step is None:
-                    report.notes.append(f"the log starts at step {raw.step}: replayed from "
-                                        f"its state")
+                    report.notes.append(
+                        f"the log starts at step {raw.step}: replayed from its state"
+                    )
                 keyframe = _logged_record(raw)
                 sim.resume(keyframe)
                 last_exists = keyframe.exists.copy()
@@ -510,8 +621,13 @@ def replay_log(path: str, *, from_step: int | None = None, to_step: int | None =
                     record = sim.record()
             except SimulationError as exc:
                 report.steps_compared += 1
-                report.add([Divergence(raw.step, "simulation", "error",
-                                       detail=f"the replay stopped: {exc}")])
+                report.add(
+                    [
+                        Divergence(
+                            raw.step, "simulation", "error", detail=f"the replay stopped: {exc}"
+                        )
+                    ]
+                )
                 if not go_on:
                     report.stopped_early = True
                     break
@@ -551,14 +667,18 @@ def replay_log(path: str, *, from_step: int | None = None, to_step: int | None =
         raise LogError(f"{path}: step {from_step} is not in the log")
     if not report.stopped_early and (to_step is None or last_step is None or last_step < to_step):
         _truncation(log, last_step, report)
-        if to_step is not None and (last_step is None or last_step < to_step) \
-                and not report.truncated:
+        if (
+            to_step is not None
+            and (last_step is None or last_step < to_step)
+            and not report.truncated
+        ):
             report.notes.append(f"the log ends at step {last_step}, before --to-step {to_step}")
     return report
 
 
 # ---------------------------------------------------------------------------------------------
 # diff
+
 
 def _pairs(a: Iterator[RawStep], b: Iterator[RawStep]):
     """Merge two step streams by step index: (step, raw_a or None, raw_b or None)."""
@@ -575,9 +695,16 @@ def _pairs(a: Iterator[RawStep], b: Iterator[RawStep]):
             sa, sb = next(a, None), next(b, None)
 
 
-def diff_logs(path_a: str, path_b: str, *, from_step: int | None = None,
-              to_step: int | None = None, tolerance: float | None = None,
-              all_steps: bool = False, max_reported: int = DEFAULT_MAX_REPORTED) -> Report:
+def diff_logs(
+    path_a: str,
+    path_b: str,
+    *,
+    from_step: int | None = None,
+    to_step: int | None = None,
+    tolerance: float | None = None,
+    all_steps: bool = False,
+    max_reported: int = DEFAULT_MAX_REPORTED,
+) -> Report:
     """Compare two logs of the same scene step by step, channel by channel, like `replay_log`.
 
     In the report, "logged" is log A and "replayed" is log B. Steps present in one complete log
@@ -586,12 +713,12 @@ def diff_logs(path_a: str, path_b: str, *, from_step: int | None = None,
     log_a, log_b = RawLog(path_a), RawLog(path_b)
     scene_a, _ = load_embedded_scene(log_a)
     names = [b.name for b in scene_a.bodies]
-    report = Report(mode="diff", logs=[str(path_a), str(path_b)], tolerance=tolerance,
-                    max_reported=max_reported)
+    report = Report(
+        mode="diff", logs=[str(path_a), str(path_b)], tolerance=tolerance, max_reported=max_reported
+    )
     if log_a.metadata.get("scene_sha256") != log_b.metadata.get("scene_sha256"):
         report.notes.append("the two logs embed different scenes")
-    note = versions_note(log_a.metadata, log_b.metadata, what="in B",
-                         suggest=tolerance is None)
+    note = versions_note(log_a.metadata, log_b.metadata, what="in B", suggest=tolerance is None)
     if note:
         report.notes.append(note.replace("in the log", "in A"))
     started = time.perf_counter()
@@ -608,16 +735,27 @@ def diff_logs(path_a: str, path_b: str, *, from_step: int | None = None,
                         pass
                 short, other = (log_a, "A") if ra is None else (log_b, "B")
                 if short.closed_cleanly and short.end is not None:
-                    report.add([Divergence(step, "steps", "missing", detail=(
-                        f"step {step} is in {'B' if ra is None else 'A'} only (log {other} "
-                        f"ends at step {last_step})"))])
+                    report.add(
+                        [
+                            Divergence(
+                                step,
+                                "steps",
+                                "missing",
+                                detail=(
+                                    f"step {step} is in {'B' if ra is None else 'A'} only "
+                                    f"(log {other} ends at step {last_step})"
+                                ),
+                            )
+                        ]
+                    )
                 break
             if report.first_step is None:
                 report.first_step = step
             last_step = step
             report.steps_compared += 1
-            _equal, beyond = _compare_step(ra, rb.messages, names, tolerance, report,
-                                           sides=("in A", "in B"))
+            _equal, beyond = _compare_step(
+                ra, rb.messages, names, tolerance, report, sides=("in A", "in B")
+            )
             if beyond and not go_on:
                 report.stopped_early = True
                 break
@@ -634,8 +772,9 @@ def diff_logs(path_a: str, path_b: str, *, from_step: int | None = None,
             _truncation(log, last_step, sub)
             if sub.truncated:
                 report.truncated = True
-                detail = sub.truncated_detail.replace("replayed up to its last complete step",
-                                                      "compared up to the last common step")
+                detail = sub.truncated_detail.replace(
+                    "replayed up to its last complete step", "compared up to the last common step"
+                )
                 joined = report.truncated_detail + "; " if report.truncated_detail else ""
                 report.truncated_detail = joined + f"log {label}: {detail}"
             report.notes.extend(f"log {label}: {n}" for n in sub.notes)

@@ -22,8 +22,8 @@ from __future__ import annotations
 
 import struct
 import zlib
+from collections.abc import Iterator
 from dataclasses import dataclass
-from typing import Iterator
 
 from mcap.exceptions import McapError
 from mcap.records import Channel, Chunk, Message, Metadata
@@ -79,8 +79,10 @@ class RawLog:
         self.incomplete_tail: int | None = None
         version = self.metadata.get("format_version")
         if version != FORMAT_VERSION:
-            raise LogError(f"{self.path}: log format version {version!r} is not supported "
-                           f"(this version reads {FORMAT_VERSION!r})")
+            raise LogError(
+                f"{self.path}: log format version {version!r} is not supported "
+                f"(this version reads {FORMAT_VERSION!r})"
+            )
 
     @property
     def scene_text(self) -> str:
@@ -98,8 +100,7 @@ class RawLog:
         with open(self.path, "rb") as f:
             # each chunk's CRC is checked below, on its uncompressed bytes; the reader's own
             # running CRC of the whole data section would read every byte a second time
-            reader = StreamReader(f, emit_chunks=True, validate_crcs=False,
-                                  record_size_limit=size)
+            reader = StreamReader(f, emit_chunks=True, validate_crcs=False, record_size_limit=size)
             records = reader.records
             while True:
                 try:
@@ -120,8 +121,10 @@ class RawLog:
                     return
                 except Exception as exc:  # noqa: BLE001 - cut files fail in many ways
                     # the end of what is readable: a cut, unfinished or corrupt file
-                    self.damage = (f"a damaged or incomplete record near byte {f.tell()} "
-                                   f"({type(exc).__name__})")
+                    self.damage = (
+                        f"a damaged or incomplete record near byte {f.tell()} "
+                        f"({type(exc).__name__})"
+                    )
                     return
                 yield from batch
 
@@ -129,9 +132,11 @@ class RawLog:
         """Decompress one chunk and walk its records (raises on a damaged chunk)."""
         if chunk.compression == "lz4":
             import lz4.frame
+
             data = lz4.frame.decompress(chunk.data)
         elif chunk.compression == "zstd":
             import zstandard
+
             data = zstandard.decompress(chunk.data, chunk.uncompressed_size)
         elif chunk.compression == "":
             data = chunk.data
@@ -150,10 +155,10 @@ class RawLog:
                 raise McapError("record runs past the end of its chunk")
             if opcode == _OP_MESSAGE:
                 channel, sequence = _MESSAGE_HEAD.unpack_from(data, pos)
-                yield topics.get(channel), sequence, view[pos + 22:pos + length]
+                yield topics.get(channel), sequence, view[pos + 22 : pos + length]
             elif opcode == _OP_CHANNEL:
                 cid, _schema, n = _CHANNEL_HEAD.unpack_from(data, pos)
-                topics[cid] = bytes(view[pos + 8:pos + 8 + n]).decode("utf-8")
+                topics[cid] = bytes(view[pos + 8 : pos + 8 + n]).decode("utf-8")
             pos += length
 
     # -- steps ---------------------------------------------------------------------------------
@@ -171,8 +176,10 @@ class RawLog:
                 continue
             if current is not None and sequence != current.step:
                 if sequence < current.step:
-                    raise LogError(f"{self.path}: step {sequence} comes after step "
-                                   f"{current.step}: the log is out of order")
+                    raise LogError(
+                        f"{self.path}: step {sequence} comes after step "
+                        f"{current.step}: the log is out of order"
+                    )
                 if current.complete:
                     yield current
                 else:
@@ -214,8 +221,7 @@ class Prefetch:
         self._items = items
         self._queue: queue.Queue = queue.Queue(maxsize=depth)
         self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._run, name="isaac-replay-reader",
-                                        daemon=True)
+        self._thread = threading.Thread(target=self._run, name="isaac-replay-reader", daemon=True)
         self._done = False
         self._thread.start()
 
@@ -229,7 +235,7 @@ class Prefetch:
         except BaseException as exc:  # noqa: BLE001 - handed to the consumer, raised there
             self._queue.put((self._END, exc))
 
-    def __iter__(self) -> "Prefetch":
+    def __iter__(self) -> Prefetch:
         return self
 
     def __next__(self):

@@ -47,8 +47,10 @@ class Divergence:
         if self.contact is not None:
             c = self.contact
             pair = f"{c.get('a_name', c.get('a'))!r}-{c.get('b_name', c.get('b'))!r}"
-            return (f"contact row {c['row']} ({pair}, sub-step {c.get('substep')}, "
-                    f"slot {c.get('slot')})")
+            return (
+                f"contact row {c['row']} ({pair}, sub-step {c.get('substep')}, "
+                f"slot {c.get('slot')})"
+            )
         return ""
 
 
@@ -118,11 +120,14 @@ def _describe(d: Divergence, labels: tuple[str, str] = ("logged", "replayed")) -
         if d.differing_values > 1:
             more = f" ({d.differing_values} values differ at this step on this channel"
             more += f", up to {d.max_ulps} ULP)" if d.max_ulps is not None else ")"
-        return (f"{head}, {d.field}: {logged} {_num(d.logged)}, {replayed} {_num(d.replayed)}"
-                f"{ulps}{more}")
+        return (
+            f"{head}, {d.field}: {logged} {_num(d.logged)}, {replayed} {_num(d.replayed)}"
+            f"{ulps}{more}"
+        )
     if d.kind == "count":
-        return (f"{head}: {d.field} count differs: {logged} {d.logged}, {replayed} {d.replayed}"
-                + (f"; {d.detail}" if d.detail else ""))
+        return f"{head}: {d.field} count differs: {logged} {d.logged}, {replayed} {d.replayed}" + (
+            f"; {d.detail}" if d.detail else ""
+        )
     if d.kind == "missing":
         return f"{head}: {d.detail}"
     return f"{head}: {d.detail}"
@@ -138,32 +143,44 @@ def format_text(report: Report, *, all_steps: bool = False) -> str:
     """The verdict line, then (when they differ) the divergences of the first differing step, or
     of every listed step with ``all_steps``, then the notes."""
     lines: list[str] = []
-    span = ("no steps" if report.first_step is None
-            else f"steps {report.first_step}..{report.last_step}")
+    span = (
+        "no steps"
+        if report.first_step is None
+        else f"steps {report.first_step}..{report.last_step}"
+    )
     rate = f"{report.steps_per_s:.1f} steps/s" if report.steps_per_s else "rate n/a"
     timing = f"{report.elapsed_s:.2f} s, {rate}"
-    what = ("identical" if report.tolerance is None
-            else f"equal within tolerance {report.tolerance:g}")
+    what = (
+        "identical" if report.tolerance is None else f"equal within tolerance {report.tolerance:g}"
+    )
     verb = "replayed" if report.mode == "replay" else "compared"
     if report.identical:
         extra = ""
         if report.tolerance is not None and report.within_tolerance_steps:
-            extra = (f"; {report.within_tolerance_steps} of them not bit-identical"
-                     + (f", up to {report.max_ulps_seen} ULP" if report.max_ulps_seen else ""))
+            extra = f"; {report.within_tolerance_steps} of them not bit-identical" + (
+                f", up to {report.max_ulps_seen} ULP" if report.max_ulps_seen else ""
+            )
         lines.append(f"{what}: {verb} {report.steps_compared} steps ({span}) in {timing}{extra}")
     else:
         first = report.divergences[0] if report.divergences else None
         at = f" at step {first.step}" if first else ""
-        lines.append(f"DIVERGED{at}: {report.differing_steps} of {report.steps_compared} steps "
-                     f"differ ({span}, {timing})")
-        shown = report.divergences if all_steps else [
-            d for d in report.divergences if first is not None and d.step == first.step]
+        lines.append(
+            f"DIVERGED{at}: {report.differing_steps} of {report.steps_compared} steps "
+            f"differ ({span}, {timing})"
+        )
+        shown = (
+            report.divergences
+            if all_steps
+            else [d for d in report.divergences if first is not None and d.step == first.step]
+        )
         labels = _labels(report)
         for d in shown:
             lines.append("  " + _describe(d, labels))
         if all_steps and report.differing_steps > report.max_reported:
-            lines.append(f"  ... {report.differing_steps - report.max_reported} more differing "
-                         f"steps not listed (--max-reported)")
+            lines.append(
+                f"  ... {report.differing_steps - report.max_reported} more differing "
+                f"steps not listed (--max-reported)"
+            )
         if not all_steps and report.differing_steps > 1:
             lines.append("  (--all lists every differing step)")
     if report.truncated:
@@ -200,6 +217,7 @@ def to_json(report: Report) -> str:
         "elapsed_s": report.elapsed_s,
         "steps_per_s": report.steps_per_s,
         "divergences": [
-            {k: _jsonable(v) for k, v in asdict(d).items()} for d in report.divergences],
+            {k: _jsonable(v) for k, v in asdict(d).items()} for d in report.divergences
+        ],
     }
     return json.dumps(data, indent=2, allow_nan=False)

@@ -2,8 +2,8 @@
 
 from __future__ import annotations
 
-from isaac.scene.polygon import box_vertices
 from isaac.scene import PRESETS, BodySpec, Scene, WorldSettings
+from isaac.scene.polygon import box_vertices
 
 
 def world(preset: str = "seed", **overrides) -> WorldSettings:

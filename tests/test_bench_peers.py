@@ -25,8 +25,11 @@ TRIANGLE = ((0.0, 0.0), (1.0, 0.0), (0.0, 1.0))
 
 
 def _engines() -> list[str]:
-    names = [name for name, module in (("pymunk", "pymunk"), ("box2d", "Box2D"))
-             if importlib.util.find_spec(module) is not None]
+    names = [
+        name
+        for name, module in (("pymunk", "pymunk"), ("box2d", "Box2D"))
+        if importlib.util.find_spec(module) is not None
+    ]
     try:
         importlib.import_module("isaac.engine.simulation").Simulation  # noqa: B018
         names.append("isaac-balanced")
@@ -36,8 +39,7 @@ def _engines() -> list[str]:
 
 
 def _scene(*bodies: BodySpec, gravity=(0.0, -G)) -> Scene:
-    return Scene(name="tiny", world=WorldSettings(gravity=gravity, dt=DT, steps=10),
-                 bodies=bodies)
+    return Scene(name="tiny", world=WorldSettings(gravity=gravity, dt=DT, steps=10), bodies=bodies)
 
 
 ENGINES = _engines()
@@ -92,9 +94,10 @@ def test_local_vertices_are_centred_on_the_area_centroid():
 
 
 def _polys(*vertex_lists, concrete=None) -> LocalPolygons:
-    bodies = tuple(BodySpec(name=f"b{k}", vertices=v,
-                            concrete=bool(concrete[k]) if concrete else False)
-                   for k, v in enumerate(vertex_lists))
+    bodies = tuple(
+        BodySpec(name=f"b{k}", vertices=v, concrete=bool(concrete[k]) if concrete else False)
+        for k, v in enumerate(vertex_lists)
+    )
     return LocalPolygons.from_scene(_scene(*bodies))
 
 
@@ -102,8 +105,9 @@ def test_overlap_of_two_boxes_is_the_known_depth():
     polys = _polys(BOX, BOX)
     # unit boxes 0.9 m apart along x overlap by 0.1 m; rotating one by 90 degrees changes nothing
     for angle_b in (0.0, math.pi / 2):
-        depth = quality.max_overlap(polys, np.array([[0.0, 0.0], [0.9, 0.0]]),
-                                    np.array([0.0, angle_b]))
+        depth = quality.max_overlap(
+            polys, np.array([[0.0, 0.0], [0.9, 0.0]]), np.array([0.0, angle_b])
+        )
         assert depth == pytest.approx(0.1, abs=1e-12)
 
 
@@ -138,8 +142,12 @@ def test_candidate_pairs_match_brute_force():
     verts = quality.world_vertices(polys, positions, angles)
     i, j = quality.candidate_pairs(verts)
     lo, hi = verts.min(axis=1), verts.max(axis=1)
-    expected = [(a, b) for a in range(n) for b in range(a + 1, n)
-                if np.all(lo[a] <= hi[b]) and np.all(lo[b] <= hi[a])]
+    expected = [
+        (a, b)
+        for a in range(n)
+        for b in range(a + 1, n)
+        if np.all(lo[a] <= hi[b]) and np.all(lo[b] <= hi[a])
+    ]
     assert list(zip(i.tolist(), j.tolist(), strict=True)) == expected
 
 
@@ -151,10 +159,24 @@ def test_exchange_error_is_zero_for_exchanged_velocities():
 
 def test_a_box_that_slid_sideways_means_the_pyramid_fell():
     start = np.array([[0.0, 0.5], [0.0, 1.5]])
-    ok = quality.pyramid_quality(start, start + [0.0, 0.01], np.zeros(2), np.zeros(2),
-                                 np.array([True, True]), 1, tolerance=0.1)
-    fell = quality.pyramid_quality(start, start + [[0.0, 0.0], [0.5, -0.4]], np.zeros(2),
-                                   np.zeros(2), np.array([True, True]), 1, tolerance=0.1)
+    ok = quality.pyramid_quality(
+        start,
+        start + [0.0, 0.01],
+        np.zeros(2),
+        np.zeros(2),
+        np.array([True, True]),
+        1,
+        tolerance=0.1,
+    )
+    fell = quality.pyramid_quality(
+        start,
+        start + [[0.0, 0.0], [0.5, -0.4]],
+        np.zeros(2),
+        np.zeros(2),
+        np.array([True, True]),
+        1,
+        tolerance=0.1,
+    )
     assert ok["standing"] and ok["top_drift_m"] == pytest.approx(0.01)
     assert not fell["standing"] and fell["max_sideways_m"] == pytest.approx(0.5)
 

@@ -8,8 +8,13 @@ REPO = Path(__file__).resolve().parents[1]
 
 
 def isaac(*args, cwd=REPO):
-    return subprocess.run([sys.executable, "-m", "isaac", *map(str, args)], cwd=cwd,
-                          capture_output=True, text=True, timeout=300)
+    return subprocess.run(
+        [sys.executable, "-m", "isaac", *map(str, args)],
+        cwd=cwd,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
 
 
 def test_run_prints_a_summary_with_the_physics_it_saw():
@@ -48,6 +53,5 @@ def test_check_prints_the_expanded_body_count():
 def test_profile_lists_every_stage():
     result = isaac("run", "scenes/pile.yaml", "--quiet", "--steps", "20", "--profile")
     assert result.returncode == 0, result.stderr
-    for stage in ("broad phase", "narrow phase", "push-out", "impulses", "integration",
-                  "geometry"):
+    for stage in ("broad phase", "narrow phase", "push-out", "impulses", "integration", "geometry"):
         assert stage in result.stdout

@@ -1,5 +1,6 @@
-"""First run with an empty numba cache (isaac.engine.compile_ahead): the solver is compiled by a helper
-process into the cache, this process loads it from there, and the run's bits do not change."""
+"""First run with an empty numba cache (isaac.engine.compile_ahead): the solver is compiled by a
+helper process into the cache, this process loads it from there, and the run's bits do not
+change."""
 
 from __future__ import annotations
 
@@ -8,12 +9,12 @@ import os
 import subprocess
 import sys
 
+from test_determinism import pile_scene
+
 from isaac.engine.compile_ahead import is_cold, solver_kernel
 from isaac.engine.diagnostics import state_hash
 from isaac.engine.simulation import Simulation
 from isaac.engine.step import StepSettings
-
-from test_determinism import pile_scene
 
 _FIRST_RUN = r"""
 import json, sys
@@ -38,8 +39,14 @@ def _first_run(tmp_path) -> dict:
     """The balanced pile run in a fresh process with an empty numba cache."""
     tests = os.path.dirname(os.path.abspath(__file__))
     env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "numba-cache")}
-    proc = subprocess.run([sys.executable, "-c", _FIRST_RUN.format(tests=tests)],
-                          capture_output=True, text=True, env=env, timeout=600, check=False)
+    proc = subprocess.run(
+        [sys.executable, "-c", _FIRST_RUN.format(tests=tests)],
+        capture_output=True,
+        text=True,
+        env=env,
+        timeout=600,
+        check=False,
+    )
     assert proc.returncode == 0, proc.stderr[-2000:]
     return json.loads(proc.stdout.strip().splitlines()[-1])
 
@@ -65,5 +72,6 @@ def test_the_seed_solver_is_the_kernel_prepared_for_the_seed_preset():
     from isaac.engine.solver import seed, sequential
 
     assert solver_kernel(StepSettings.of(pile_scene("seed").world)) is seed.solve_seed
-    assert (solver_kernel(StepSettings.of(pile_scene("balanced").world))
-            is sequential.solve_sequential)
+    assert (
+        solver_kernel(StepSettings.of(pile_scene("balanced").world)) is sequential.solve_sequential
+    )

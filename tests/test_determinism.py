@@ -2,15 +2,22 @@
 
 import numpy as np
 
-from isaac.scene import generators
 from isaac.engine.diagnostics import state_hash
-from isaac.scene import PRESETS, Scene, WorldSettings
 from isaac.engine.simulation import Simulation
+from isaac.scene import PRESETS, Scene, WorldSettings, generators
 
 
 def pile_scene(preset):
-    world = WorldSettings(**{**PRESETS[preset], "fidelity": preset, "gravity": (0.0, -9.81),
-                             "dt": 1 / 60, "steps": 60, "friction": True})
+    world = WorldSettings(
+        **{
+            **PRESETS[preset],
+            "fidelity": preset,
+            "gravity": (0.0, -9.81),
+            "dt": 1 / 60,
+            "steps": 60,
+            "friction": True,
+        }
+    )
     return Scene("pile", world, tuple(generators.pile(count=60, seed=3, width=6.0)))
 
 

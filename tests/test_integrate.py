@@ -3,9 +3,9 @@
 import math
 
 import pytest
+from physics_helpers import box, scene
 
 from isaac.engine.simulation import Simulation
-from physics_helpers import box, scene
 
 G = 9.81
 H = 0.01
@@ -15,8 +15,14 @@ H = 0.01
 def test_free_fall_matches_the_integrators_closed_form(integrator, offset):
     # explicit: y_n = y0 + v0 n h - g h^2 n (n - 1) / 2; semi-implicit: ... n (n + 1) / 2
     y0, v0 = 10.0, 2.0
-    sim = Simulation(scene(box("ball", position=(0.0, y0), velocity=(0.0, v0)),
-                           gravity=(0.0, -G), dt=H, integrator=integrator))
+    sim = Simulation(
+        scene(
+            box("ball", position=(0.0, y0), velocity=(0.0, v0)),
+            gravity=(0.0, -G),
+            dt=H,
+            integrator=integrator,
+        )
+    )
     for rec in sim.run(200):
         n = rec.step
         expected_y = y0 + v0 * n * H - G * H * H * n * (n + offset) / 2
@@ -25,8 +31,11 @@ def test_free_fall_matches_the_integrators_closed_form(integrator, offset):
 
 
 def test_concrete_body_never_moves_under_gravity():
-    sim = Simulation(scene(box("rock", position=(1.0, 2.0), concrete=True, velocity=(5.0, 0.0)),
-                           gravity=(0.0, -G)))
+    sim = Simulation(
+        scene(
+            box("rock", position=(1.0, 2.0), concrete=True, velocity=(5.0, 0.0)), gravity=(0.0, -G)
+        )
+    )
     for rec in sim.run(50):
         assert rec.position[0].tolist() == [1.0, 2.0]
         assert rec.velocity[0].tolist() == [0.0, 0.0]
@@ -52,11 +61,16 @@ def test_time_is_step_index_times_dt():
 
 
 def test_bodies_enter_and_leave_at_their_times():
-    sim = Simulation(scene(box("late", position=(0.0, 5.0), enters_at=0.5),
-                           box("brief", position=(3.0, 5.0), leaves_at=0.3),
-                           gravity=(0.0, -G), dt=0.1))
+    sim = Simulation(
+        scene(
+            box("late", position=(0.0, 5.0), enters_at=0.5),
+            box("brief", position=(3.0, 5.0), leaves_at=0.3),
+            gravity=(0.0, -G),
+            dt=0.1,
+        )
+    )
     history = [(rec.time, rec.exists.tolist(), rec.position[:, 1].tolist()) for rec in sim.run(10)]
-    for t, exists, y in history:
+    for t, exists, _y in history:
         assert exists == [t >= 0.5, t < 0.3]
     # a body that has not entered stays where the scene put it; one that left stays where it was
     assert history[3][2][0] == 5.0

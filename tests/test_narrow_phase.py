@@ -2,9 +2,9 @@
 
 import numpy as np
 import pytest
+from physics_helpers import box, scene
 
 from isaac.engine.simulation import Simulation
-from physics_helpers import box, scene
 
 
 def contacts_of(*bodies, **world):
@@ -32,10 +32,12 @@ def test_separated_shapes_have_no_contact():
 
 
 def test_swapping_bodies_flips_the_normal_and_keeps_the_depth():
-    first = contacts_of(box("a", position=(0.0, 0.0), angle=0.3),
-                        box("b", 2.0, 0.5, position=(0.9, 0.4)))
-    second = contacts_of(box("b", 2.0, 0.5, position=(0.9, 0.4)),
-                         box("a", position=(0.0, 0.0), angle=0.3))
+    first = contacts_of(
+        box("a", position=(0.0, 0.0), angle=0.3), box("b", 2.0, 0.5, position=(0.9, 0.4))
+    )
+    second = contacts_of(
+        box("b", 2.0, 0.5, position=(0.9, 0.4)), box("a", position=(0.0, 0.0), angle=0.3)
+    )
     assert len(first) == len(second) == 1
     np.testing.assert_allclose(second.normal[0], -first.normal[0], atol=1e-14)
     assert second.depth[0] == pytest.approx(first.depth[0], abs=1e-14)
@@ -44,8 +46,9 @@ def test_swapping_bodies_flips_the_normal_and_keeps_the_depth():
 def test_vertex_face_contact_is_at_the_penetrating_vertex():
     # b is a diamond whose lowest vertex dips 0.1 m into a's top face
     r = np.sqrt(0.5)
-    c = contacts_of(box("a", position=(0.0, 0.0)),
-                    box("b", position=(0.2, 0.5 + r - 0.1), angle=np.pi / 4))
+    c = contacts_of(
+        box("a", position=(0.0, 0.0)), box("b", position=(0.2, 0.5 + r - 0.1), angle=np.pi / 4)
+    )
     assert len(c) == 1
     np.testing.assert_allclose(c.normal[0], [0.0, 1.0], atol=1e-12)
     assert c.depth[0] == pytest.approx(0.1, abs=1e-12)
@@ -74,14 +77,23 @@ def test_absent_bodies_do_not_collide():
 
 
 def test_concrete_pairs_are_skipped():
-    assert len(contacts_of(box("a", concrete=True), box("b", position=(0.5, 0.0), concrete=True))) == 0
+    assert (
+        len(contacts_of(box("a", concrete=True), box("b", position=(0.5, 0.0), concrete=True))) == 0
+    )
 
 
 def test_near_tie_keeps_the_previous_axis():
     # a box resting exactly on another: a's top face and b's bottom face tie; with hysteresis
     # the normal chosen in the first step is kept while the tie persists
-    sim = Simulation(scene(box("low", concrete=True), box("high", position=(0.0, 0.999)),
-                           preset="balanced", gravity=(0.0, -9.81), friction=True))
+    sim = Simulation(
+        scene(
+            box("low", concrete=True),
+            box("high", position=(0.0, 0.999)),
+            preset="balanced",
+            gravity=(0.0, -9.81),
+            friction=True,
+        )
+    )
     features = set()
     for _ in range(50):
         rec = sim.step()

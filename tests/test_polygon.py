@@ -44,15 +44,15 @@ def test_regular_50_gon_mass_properties_match_closed_form():
     # J = n R^4 sin(alpha) (2 + cos(alpha)) / 12, i.e. I = m R^2 (2 + cos(alpha)) / 6.
     assert area == pytest.approx(n * radius**2 * math.sin(alpha) / 2.0, rel=REL)
     assert np.allclose(centroid, [0.0, 0.0], atol=1e-15)
-    assert second_moment / area == pytest.approx(radius**2 * (2.0 + math.cos(alpha)) / 6.0,
-                                                 rel=REL)
+    assert second_moment / area == pytest.approx(radius**2 * (2.0 + math.cos(alpha)) / 6.0, rel=REL)
 
 
 def test_regular_vertex_k_sits_at_phase_plus_k_steps():
     v = regular_vertices(6, 2.0, phase=0.25)
     k = 4
-    assert v[k] == pytest.approx([2.0 * math.cos(0.25 + 2 * math.pi * k / 6),
-                                  2.0 * math.sin(0.25 + 2 * math.pi * k / 6)])
+    assert v[k] == pytest.approx(
+        [2.0 * math.cos(0.25 + 2 * math.pi * k / 6), 2.0 * math.sin(0.25 + 2 * math.pi * k / 6)]
+    )
 
 
 def test_clockwise_input_is_reversed_to_ccw_with_identical_bits():
@@ -81,18 +81,21 @@ def test_nearly_collinear_vertex_on_a_convex_polygon_is_accepted():
     assert mass_properties(validate_polygon(on_edge))[0] == pytest.approx(2.0, rel=REL)
 
 
-@pytest.mark.parametrize("vertices, reason", [
-    ([[0, 0], [1, 0]], "at least 3"),
-    (regular_vertices(51, 1.0), "at most 50"),
-    ([[0, 0], [1, 0], [1, 0], [0, 1]], "duplicate"),
-    ([[0, 0], [1, 1], [2, 2]], "collinear"),
-    ([[0, 0], [1, 0], [1, 1], [0.9, 0.1], [0, 1]], "not convex"),
-    ([[0, 0], [2, 1], [2, 0], [0, 1.5]], "self-intersecting"),
-    ([[0, 0], [1, 1], [1, 0], [0, 1]], "self-intersecting"),
-    (regular_vertices(5, 1.0)[[0, 2, 4, 1, 3]], "self-intersecting"),  # pentagram
-    ([[0, 0], [1, 0], [0.5, 1.5e-9]], "too small"),
-    ([[0, 0], [1, float("nan")], [0, 1]], "finite"),
-])
+@pytest.mark.parametrize(
+    "vertices, reason",
+    [
+        ([[0, 0], [1, 0]], "at least 3"),
+        (regular_vertices(51, 1.0), "at most 50"),
+        ([[0, 0], [1, 0], [1, 0], [0, 1]], "duplicate"),
+        ([[0, 0], [1, 1], [2, 2]], "collinear"),
+        ([[0, 0], [1, 0], [1, 1], [0.9, 0.1], [0, 1]], "not convex"),
+        ([[0, 0], [2, 1], [2, 0], [0, 1.5]], "self-intersecting"),
+        ([[0, 0], [1, 1], [1, 0], [0, 1]], "self-intersecting"),
+        (regular_vertices(5, 1.0)[[0, 2, 4, 1, 3]], "self-intersecting"),  # pentagram
+        ([[0, 0], [1, 0], [0.5, 1.5e-9]], "too small"),
+        ([[0, 0], [1, float("nan")], [0, 1]], "finite"),
+    ],
+)
 def test_invalid_polygon_raises_value_error_naming_the_reason(vertices, reason):
     with pytest.raises(ValueError, match=reason):
         validate_polygon(vertices)

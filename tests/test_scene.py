@@ -8,7 +8,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from isaac.scene.polygon import mass_properties
 from isaac.scene import (
     PRESETS,
     BodySpec,
@@ -18,6 +17,7 @@ from isaac.scene import (
     load_scene_text,
     scene_to_yaml,
 )
+from isaac.scene.polygon import mass_properties
 
 SCENES = sorted((Path(__file__).resolve().parent.parent / "scenes").glob("*.yaml"))
 BOX = "shape: {box: [1.0, 1.0]}"
@@ -62,13 +62,31 @@ def test_awkward_floats_round_trip_bit_for_bit():
     body = BodySpec(
         name='odd "name" \\ é',
         vertices=((0.1, -0.0), (1.0 / 3.0, 5e-324), (2.0 / 3.0, 0.7000000000000001)),
-        position=(-0.0, 1e-300), angle=math.pi, velocity=(1e5 / 3.0, -2.5e-7),
-        angular_velocity=-0.0, density=7.0 / 9.0, restitution=0.1 + 0.2, friction=1e-12,
-        enters_at=1.0 / 7.0, leaves_at=2.0 / 7.0)
+        position=(-0.0, 1e-300),
+        angle=math.pi,
+        velocity=(1e5 / 3.0, -2.5e-7),
+        angular_velocity=-0.0,
+        density=7.0 / 9.0,
+        restitution=0.1 + 0.2,
+        friction=1e-12,
+        enters_at=1.0 / 7.0,
+        leaves_at=2.0 / 7.0,
+    )
     world = WorldSettings(gravity=(-0.0, -9.80665), dt=1.0 / 240.0, slop=0.1 + 0.2 - 0.3)
-    scene = Scene(name="odd", world=world, bodies=(body,), source="<text>",
-                  analytic={"kind": "bounce", "height": 1.0 / 3.0, "n": 3, "on": True,
-                            "series": [0.1, 2], "nested": {"x": -0.0}})
+    scene = Scene(
+        name="odd",
+        world=world,
+        bodies=(body,),
+        source="<text>",
+        analytic={
+            "kind": "bounce",
+            "height": 1.0 / 3.0,
+            "n": 3,
+            "on": True,
+            "series": [0.1, 2],
+            "nested": {"x": -0.0},
+        },
+    )
     _assert_round_trips(scene)
 
 
@@ -82,7 +100,8 @@ def test_without_world_the_default_preset_applies():
 
 def test_preset_is_applied_then_explicit_keys_override_it():
     scene = load_scene_text(
-        f"world: {{fidelity: seed, iterations: 5, ccd: speculative}}\nbodies:\n  - {{{BOX}}}\n")
+        f"world: {{fidelity: seed, iterations: 5, ccd: speculative}}\nbodies:\n  - {{{BOX}}}\n"
+    )
     expected = dict(PRESETS["seed"], iterations=5, ccd="speculative")
     assert {k: getattr(scene.world, k) for k in expected} == expected
     assert scene.world.fidelity == "seed"
@@ -91,7 +110,8 @@ def test_preset_is_applied_then_explicit_keys_override_it():
 def test_yaml_1_1_words_stay_strings_and_exponent_numbers_are_floats():
     scene = load_scene_text(
         "world:\n  ccd: off\n  position_correction: none\n  dt: 1e-3\n  gravity: [0, -9.81E0]\n"
-        f"bodies:\n  - {{{BOX}}}\n")
+        f"bodies:\n  - {{{BOX}}}\n"
+    )
     assert scene.world.ccd == "off"
     assert scene.world.position_correction == "none"
     assert scene.world.dt == 0.001
@@ -107,9 +127,9 @@ def test_body_defaults_match_the_contract():
 
 def test_clockwise_polygon_far_from_origin_is_stored_ccw_with_its_own_coordinates():
     scene = load_scene_text(
-        "bodies:\n  - shape: {polygon: [[100, 50], [100, 51], [102, 51], [102, 50]]}\n")
-    assert scene.bodies[0].vertices == ((102.0, 50.0), (102.0, 51.0), (100.0, 51.0),
-                                        (100.0, 50.0))
+        "bodies:\n  - shape: {polygon: [[100, 50], [100, 51], [102, 51], [102, 50]]}\n"
+    )
+    assert scene.bodies[0].vertices == ((102.0, 50.0), (102.0, 51.0), (100.0, 51.0), (100.0, 50.0))
 
 
 def test_regular_shape_expands_to_its_vertices():
@@ -129,17 +149,27 @@ def test_bodies_come_first_then_generators_in_order():
     scene = load_scene_text(
         "generators:\n  - pyramid: {rows: 2, box: [1, 1], ground: false}\n"
         "  - pile: {count: 2, name: p}\n"
-        f"bodies:\n  - {{name: solo, {BOX}}}\n")
+        f"bodies:\n  - {{name: solo, {BOX}}}\n"
+    )
     assert [b.name for b in scene.bodies] == [
-        "solo", "pyramid/1/1", "pyramid/1/2", "pyramid/2/1", "p/floor", "p/left", "p/right",
-        "p/1", "p/2"]
+        "solo",
+        "pyramid/1/1",
+        "pyramid/1/2",
+        "pyramid/2/1",
+        "p/floor",
+        "p/left",
+        "p/right",
+        "p/1",
+        "p/2",
+    ]
 
 
 def test_pyramid_boxes_sit_in_rows_centred_on_the_base():
     rows, w, h, gap, base = 4, 1.0, 0.5, 0.1, (2.0, 1.0)
     scene = load_scene_text(
         f"generators:\n  - pyramid: {{rows: {rows}, box: [{w}, {h}], base: [2.0, 1.0], "
-        f"spacing: {gap}, density: 3.0}}\n")
+        f"spacing: {gap}, density: 3.0}}\n"
+    )
     ground, boxes = scene.bodies[0], {b.name: b for b in scene.bodies[1:]}
     assert len(boxes) == rows * (rows + 1) // 2
     assert ground.concrete and ground.name == "pyramid/ground"
@@ -159,15 +189,20 @@ def _world_vertices(body: BodySpec) -> np.ndarray:
     # the engine's convention: local vertices re-centred on the centroid, then rotated (CCW)
     local = np.array(body.vertices) - mass_properties(body.vertices)[1]
     c, s = math.cos(body.angle), math.sin(body.angle)
-    return np.column_stack([body.position[0] + c * local[:, 0] - s * local[:, 1],
-                            body.position[1] + s * local[:, 0] + c * local[:, 1]])
+    return np.column_stack(
+        [
+            body.position[0] + c * local[:, 0] - s * local[:, 1],
+            body.position[1] + s * local[:, 0] + c * local[:, 1],
+        ]
+    )
 
 
 def test_pile_bodies_start_inside_the_container_and_apart():
     width, r_max = 6.0, 0.5
     scene = load_scene_text(
         "generators:\n  - pile: {count: 120, seed: 3, radius: [0.2, 0.5], sides: [3, 8],\n"
-        "              container: {width: 6.0, thickness: 0.4, position: [1.0, -2.0]}}\n")
+        "              container: {width: 6.0, thickness: 0.4, position: [1.0, -2.0]}}\n"
+    )
     floor, left, right, *bodies = scene.bodies
     assert [floor.name, left.name, right.name] == ["pile/floor", "pile/left", "pile/right"]
     assert floor.concrete and left.concrete and right.concrete
@@ -181,8 +216,9 @@ def test_pile_bodies_start_inside_the_container_and_apart():
         assert np.all(radius <= r_max + 1e-12) and np.all(radius >= 0.2 - 1e-12)
     # the local origin lands on the cell's centre; circles of radius <= r_max around centres at
     # least 2 * r_max apart cannot overlap
-    cell_centres = np.array([
-        _world_vertices(b)[0] - _rotate(np.array(b.vertices[0]), b.angle) for b in bodies])
+    cell_centres = np.array(
+        [_world_vertices(b)[0] - _rotate(np.array(b.vertices[0]), b.angle) for b in bodies]
+    )
     gaps = np.hypot(*(cell_centres[:, None, :] - cell_centres[None, :, :]).transpose(2, 0, 1))
     np.fill_diagonal(gaps, np.inf)
     assert gaps.min() >= 2 * r_max
@@ -194,8 +230,10 @@ def _rotate(v: np.ndarray, angle: float) -> np.ndarray:
 
 
 def test_pile_polygons_respect_sides_and_radius_ranges():
-    scene = load_scene_text("generators:\n  - pile: {count: 300, sides: [4, 6], "
-                            "radius: [0.3, 0.4], container: {width: 20}}\n")
+    scene = load_scene_text(
+        "generators:\n  - pile: {count: 300, sides: [4, 6], "
+        "radius: [0.3, 0.4], container: {width: 20}}\n"
+    )
     bodies = scene.bodies[3:]
     sides = {len(b.vertices) for b in bodies}
     assert sides == {4, 5, 6}
@@ -220,7 +258,8 @@ def test_pile_walls_default_to_just_tall_enough_for_the_grid():
 @pytest.mark.parametrize("count", [2000, 10000])
 def test_big_piles_are_a_few_lines_of_yaml(count):
     scene = load_scene_text(
-        f"generators:\n  - pile: {{count: {count}, seed: 1, container: {{width: 100}}}}\n")
+        f"generators:\n  - pile: {{count: {count}, seed: 1, container: {{width: 100}}}}\n"
+    )
     assert len(scene.bodies) == count + 3
     assert len({b.name for b in scene.bodies}) == count + 3
 
@@ -233,7 +272,8 @@ def test_a_10000_body_pile_round_trips_bit_for_bit():
 
 def test_analytic_block_is_kept_as_plain_data():
     scene = load_scene_text(
-        f"bodies:\n  - {{{BOX}}}\nanalytic: {{kind: bounce, heights: [1.0, 0.64], n: 2}}\n")
+        f"bodies:\n  - {{{BOX}}}\nanalytic: {{kind: bounce, heights: [1.0, 0.64], n: 2}}\n"
+    )
     assert scene.analytic == {"kind": "bounce", "heights": [1.0, 0.64], "n": 2}
 
 

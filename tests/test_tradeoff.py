@@ -12,8 +12,6 @@ from physics_helpers import box, scene
 
 from isaac.app import tradeoff
 from isaac.app.cli import main
-from isaac.scene import PRESETS, load_scene
-from isaac.engine.simulation import Simulation
 from isaac.app.tradeoff import (
     GridPoint,
     TradeoffError,
@@ -24,17 +22,22 @@ from isaac.app.tradeoff import (
     sample_times,
     simulate,
 )
+from isaac.engine.simulation import Simulation
+from isaac.scene import PRESETS, load_scene
 
 G = 9.81
 
 
 # --- grid -----------------------------------------------------------------------------------
 
+
 def test_default_grid_is_the_presets_times_three_dt_values():
     grid = parse_grid(None, 0.01)
     assert [(p.label, p.dt) for p in grid] == [
-        (preset, dt) for preset in ("seed", "fast", "balanced", "accurate")
-        for dt in (0.02, 0.01, 0.005)]
+        (preset, dt)
+        for preset in ("seed", "fast", "balanced", "accurate")
+        for dt in (0.02, 0.01, 0.005)
+    ]
 
 
 def test_grid_axes_multiply_and_read_like_a_scene():
@@ -45,15 +48,18 @@ def test_grid_axes_multiply_and_read_like_a_scene():
     assert grid[0].label == "fast iterations=4"
 
 
-@pytest.mark.parametrize("spec, message", [
-    ("preset=quick", "unknown preset 'quick'"),
-    ("substeps=0", "out of range"),
-    ("ccd=maybe", "ccd"),
-    ("dt=0", "out of range"),
-    ("dt=abc", "cannot read 'abc'"),
-    ("colour=red", "unknown axis 'colour'"),
-    ("iterations", "expected KEY=V1,V2"),
-])
+@pytest.mark.parametrize(
+    "spec, message",
+    [
+        ("preset=quick", "unknown preset 'quick'"),
+        ("substeps=0", "out of range"),
+        ("ccd=maybe", "ccd"),
+        ("dt=0", "out of range"),
+        ("dt=abc", "cannot read 'abc'"),
+        ("colour=red", "unknown axis 'colour'"),
+        ("iterations", "expected KEY=V1,V2"),
+    ],
+)
 def test_bad_grid_is_refused_with_a_clear_message(spec, message):
     with pytest.raises(TradeoffError, match=message):
         parse_grid([spec], 0.01)
@@ -69,6 +75,7 @@ def test_grid_point_applies_the_preset_and_keeps_the_scene_physics():
 
 
 # --- analytic references ----------------------------------------------------------------------
+
 
 def test_shipped_scenes_are_classified():
     assert analytic_model(load_scene("scenes/bounce.yaml")) == "drop"
@@ -121,6 +128,7 @@ def test_declared_model_that_does_not_fit_is_refused():
 
 # --- runs and comparisons ---------------------------------------------------------------------
 
+
 def test_samples_are_the_states_at_common_times():
     sc = load_scene("scenes/bounce.yaml")
     sc = replace(sc, world=replace(sc.world, steps=60))
@@ -140,9 +148,16 @@ def test_samples_between_steps_are_interpolated():
 
 def test_tunneling_through_concrete_is_detected():
     def shot(ccd):
-        return scene(box("wall", 0.05, 4.0, concrete=True),
-                     box("bullet", 0.1, 0.1, position=(-0.5, 0.0), velocity=(200.0, 0.0)),
-                     preset="balanced", ccd=ccd, gravity=(0.0, 0.0), dt=1 / 60, steps=10)
+        return scene(
+            box("wall", 0.05, 4.0, concrete=True),
+            box("bullet", 0.1, 0.1, position=(-0.5, 0.0), velocity=(200.0, 0.0)),
+            preset="balanced",
+            ccd=ccd,
+            gravity=(0.0, 0.0),
+            dt=1 / 60,
+            steps=10,
+        )
+
     times = sample_times(10 / 60, 1 / 60)
     assert simulate(shot("off"), times).tunneled == ["bullet"]
     assert simulate(shot("speculative"), times).tunneled == []
@@ -161,23 +176,28 @@ def test_pareto_front_keeps_only_undominated_points():
 def test_measure_bounce_error_shrinks_with_dt_and_reference_row_is_exact():
     sc = load_scene("scenes/bounce.yaml")
     grid = parse_grid(["preset=balanced", "dt=1/60,1/120,1/240"], sc.world.dt)
-    result = measure(sc, grid, reference="analytic", duration=2.0, repeats=1,
-                     min_seconds=0.0)
+    result = measure(sc, grid, reference="analytic", duration=2.0, repeats=1, min_seconds=0.0)
     assert result.reference == "analytic (drop)"
     assert result.reference_row["rms_error_m"] == 0.0
     errors = [r["rms_error_m"] for r in result.rows]
     assert errors[0] > errors[1] > errors[2] > 0.0
     for row in result.rows:
         assert row["ms_per_step"] > 0.0 and row["steps_per_s"] == pytest.approx(
-            1e3 / row["ms_per_step"])
+            1e3 / row["ms_per_step"]
+        )
         assert row["ms_per_sim_s"] == pytest.approx(row["ms_per_step"] / row["dt"])
         assert row["tunneled"] == 0 and row["diverged"] == ""
 
 
 def test_measure_against_accurate_reference_on_a_tiny_scene():
-    sc = scene(box("ground", 10.0, 1.0, position=(0.0, -0.5), concrete=True),
-               box("box", position=(0.0, 1.0), restitution=0.5), preset="balanced",
-               gravity=(0.0, -G), dt=1 / 60, steps=60)
+    sc = scene(
+        box("ground", 10.0, 1.0, position=(0.0, -0.5), concrete=True),
+        box("box", position=(0.0, 1.0), restitution=0.5),
+        preset="balanced",
+        gravity=(0.0, -G),
+        dt=1 / 60,
+        steps=60,
+    )
     grid = parse_grid(["preset=seed,accurate", "dt=1/60"], sc.world.dt)
     result = measure(sc, grid, repeats=1, min_seconds=0.0)
     assert result.reference.startswith("accurate, dt=")
@@ -189,12 +209,30 @@ def test_measure_against_accurate_reference_on_a_tiny_scene():
 
 # --- the command ------------------------------------------------------------------------------
 
+
 def test_command_writes_table_csv_and_plot(tmp_path, capsys):
     csv_path, png_path = tmp_path / "out.csv", tmp_path / "out.png"
-    status = main(["tradeoff", "scenes/bounce.yaml", "--grid", "preset=fast,balanced",
-                   "--grid", "dt=1/60,1/120", "--duration", "1", "--repeats", "1",
-                   "--min-time", "0", "--quiet",
-                   "--csv", str(csv_path), "--png", str(png_path)])
+    status = main(
+        [
+            "tradeoff",
+            "scenes/bounce.yaml",
+            "--grid",
+            "preset=fast,balanced",
+            "--grid",
+            "dt=1/60,1/120",
+            "--duration",
+            "1",
+            "--repeats",
+            "1",
+            "--min-time",
+            "0",
+            "--quiet",
+            "--csv",
+            str(csv_path),
+            "--png",
+            str(png_path),
+        ]
+    )
     assert status == 0
     out = capsys.readouterr().out
     assert "reference: analytic (drop)" in out and "ms/step" in out and "RMS err m" in out
@@ -214,7 +252,16 @@ def test_command_turns_a_bad_grid_into_one_line(capsys):
 
 
 def test_command_refuses_analytic_reference_for_a_pile(capsys):
-    status = main(["tradeoff", "scenes/pyramid.yaml", "--reference", "analytic", "--quiet",
-                   "--duration", "0.1"])
+    status = main(
+        [
+            "tradeoff",
+            "scenes/pyramid.yaml",
+            "--reference",
+            "analytic",
+            "--quiet",
+            "--duration",
+            "0.1",
+        ]
+    )
     assert status == 2
     assert "no closed form known" in capsys.readouterr().err

@@ -18,12 +18,15 @@ PEERS = ("pymunk", "box2d")
 def make_engine(name: str, scene: Scene):
     if name == "pymunk":
         from bench.peers.pymunk_engine import PymunkEngine
+
         return PymunkEngine(scene)
     if name == "box2d":
         from bench.peers.box2d_engine import Box2DEngine
+
         return Box2DEngine(scene)
     if name.startswith("isaac"):
         from bench.peers.isaac_engine import IsaacEngine
+
         preset = name.partition("-")[2] or None
         return IsaacEngine(scene, preset=preset)
     raise ValueError(f"unknown engine {name!r}")
@@ -32,6 +35,7 @@ def make_engine(name: str, scene: Scene):
 def engine_available(name: str) -> tuple[bool, str]:
     """(available, reason if not) without building anything."""
     import importlib
+
     module = {"pymunk": "pymunk", "box2d": "Box2D"}.get(name)
     try:
         if module is not None:

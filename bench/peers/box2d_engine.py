@@ -33,12 +33,18 @@ class Box2DEngine:
                 body = world.CreateStaticBody(**kwargs)
             else:
                 body = world.CreateDynamicBody(
-                    **kwargs, linearVelocity=tuple(spec.velocity),
-                    angularVelocity=spec.angular_velocity, allowSleep=False, awake=True)
+                    **kwargs,
+                    linearVelocity=tuple(spec.velocity),
+                    angularVelocity=spec.angular_velocity,
+                    allowSleep=False,
+                    awake=True,
+                )
             body.CreatePolygonFixture(
-                vertices=local_vertices(spec.vertices), density=spec.density,
+                vertices=local_vertices(spec.vertices),
+                density=spec.density,
                 friction=spec.friction if scene.world.friction else 0.0,
-                restitution=spec.restitution)
+                restitution=spec.restitution,
+            )
             if not spec.concrete:
                 body.sleepingAllowed = False
             self.bodies.append(body)

@@ -10,16 +10,18 @@ from __future__ import annotations
 import numpy as np
 
 from bench.scenes import with_preset
-from isaac.scene import Scene
 from isaac.engine.simulation import Simulation
+from isaac.scene import Scene
 
 
 def describe(scene: Scene) -> str:
     w = scene.world
     position = getattr(w, "position_iterations", None)
     position_text = f" + {position} position" if position is not None else ""
-    return (f"preset {w.fidelity}: {w.solver} {w.iterations} velocity{position_text} it, "
-            f"{w.substeps} substep(s), {w.contact_points}-pt, ccd {w.ccd}")
+    return (
+        f"preset {w.fidelity}: {w.solver} {w.iterations} velocity{position_text} it, "
+        f"{w.substeps} substep(s), {w.contact_points}-pt, ccd {w.ccd}"
+    )
 
 
 class IsaacEngine:

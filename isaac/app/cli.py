@@ -19,7 +19,8 @@ COMMAND_MODULES = ("isaac.app.run", "isaac.app.logs", "isaac.app.verify", "isaac
 
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
-        prog="isaac", description="ISAAC: recorded, replayable 2D rigid-body physics.")
+        prog="isaac", description="ISAAC: recorded, replayable 2D rigid-body physics."
+    )
     subparsers = parser.add_subparsers(dest="command", metavar="COMMAND")
     subparsers.required = True
     for name in COMMAND_MODULES:

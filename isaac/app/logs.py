@@ -59,43 +59,72 @@ def _inspect(args: argparse.Namespace) -> int:
     concrete = int(world.concrete.sum())
     w = log.settings
     print(f"log      {args.log}")
-    print(f"scene    {meta.get('scene_name', '?')} (sha256 {meta.get('scene_sha256', '?')[:16]}...)")
-    print(f"versions isaac {meta.get('engine_version')}, Python {meta.get('python_version')}, "
-          f"numpy {meta.get('numpy_version')}, numba {meta.get('numba_version')}")
+    print(
+        f"scene    {meta.get('scene_name', '?')} (sha256 {meta.get('scene_sha256', '?')[:16]}...)"
+    )
+    print(
+        f"versions isaac {meta.get('engine_version')}, Python {meta.get('python_version')}, "
+        f"numpy {meta.get('numpy_version')}, numba {meta.get('numba_version')}"
+    )
     print(f"machine  {meta.get('platform')} ({meta.get('cpu')})")
-    print(f"settings fidelity {w.get('fidelity')}, dt {w.get('dt')} s, gravity {w.get('gravity')}, "
-          f"integrator {w.get('integrator')}, solver {w.get('solver')}")
+    print(
+        f"settings fidelity {w.get('fidelity')}, dt {w.get('dt')} s, gravity {w.get('gravity')}, "
+        f"integrator {w.get('integrator')}, solver {w.get('solver')}"
+    )
     changes = max(s.world_changes - 1, 0)
     print(f"bodies   {n} ({concrete} concrete); bodies entered or left at {changes} step(s)")
     if s.steps:
-        print(f"steps    {s.steps} (step {s.first_step} to {s.last_step}, "
-              f"t = {_g(s.first_step * log.dt)} to {_g(s.last_step * log.dt)} s)")
+        print(
+            f"steps    {s.steps} (step {s.first_step} to {s.last_step}, "
+            f"t = {_g(s.first_step * log.dt)} to {_g(s.last_step * log.dt)} s)"
+        )
     else:
         print("steps    0")
     depth = f"{_g(s.max_depth)} m (step {s.max_depth_step})" if s.contacts else "-"
     impulse = f"{_g(s.max_impulse)} N s (step {s.max_impulse_step})" if s.contacts else "-"
     print(f"contacts {s.contacts} in all; max depth {depth}; largest impulse {impulse}")
     if s.energy_start is not None:
-        print(f"energy   start {_g(s.energy_start)} J, end {_g(s.energy_end)} J "
-              f"(kinetic + potential)")
+        print(
+            f"energy   start {_g(s.energy_start)} J, end {_g(s.energy_end)} J (kinetic + potential)"
+        )
     end = log.end
     if log.closed_cleanly and end is not None:
         if end.get("complete") == "true":
             state = "closed cleanly; run complete"
         else:
-            state = (f"closed cleanly; run stopped at step {end.get('stopped_at') or '?'}"
-                     + (f": {end['reason']}" if end.get("reason") else ""))
+            state = f"closed cleanly; run stopped at step {end.get('stopped_at') or '?'}" + (
+                f": {end['reason']}" if end.get("reason") else ""
+            )
     else:
         last = s.last_step if s.steps else "none"
-        state = (f"NOT closed (unfinished or damaged); readable up to step {last}; "
-                 f"`isaac recover {args.log} OUT.mcap` writes a clean copy")
+        state = (
+            f"NOT closed (unfinished or damaged); readable up to step {last}; "
+            f"`isaac recover {args.log} OUT.mcap` writes a clean copy"
+        )
     print(f"file     {state}")
     return 0
 
 
-_COLUMNS = ("row", "sub", "a", "b", "slot", "feature", "point_x", "point_y", "normal_x",
-            "normal_y", "depth", "push_a_x", "push_a_y", "push_b_x", "push_b_y", "impulse",
-            "tangent_imp", "e")
+_COLUMNS = (
+    "row",
+    "sub",
+    "a",
+    "b",
+    "slot",
+    "feature",
+    "point_x",
+    "point_y",
+    "normal_x",
+    "normal_y",
+    "depth",
+    "push_a_x",
+    "push_a_y",
+    "push_b_x",
+    "push_b_y",
+    "impulse",
+    "tangent_imp",
+    "e",
+)
 
 
 def _print_step(log, k: int) -> int:
@@ -105,19 +134,37 @@ def _print_step(log, k: int) -> int:
     print(f"step {k}, t = {_g(r.time)} s: {len(c)} contact(s)")
     if logged.stats is not None:
         st = logged.stats
-        print(f"  kinetic {_g(st['kinetic_energy'])} J, potential {_g(st['potential_energy'])} J, "
-              f"state hash {st['state_hash'][:16]}...")
+        print(
+            f"  kinetic {_g(st['kinetic_energy'])} J, potential {_g(st['potential_energy'])} J, "
+            f"state hash {st['state_hash'][:16]}..."
+        )
     if not len(c):
         return 0
     rows = []
     for i in range(len(c)):
         a, b = int(c.a[i]), int(c.b[i])
-        rows.append((str(i), str(int(c.substep[i])), f"{a}:{names[a]}", f"{b}:{names[b]}",
-                     str(int(c.slot[i])), str(int(c.feature[i])),
-                     _g(c.point[i, 0]), _g(c.point[i, 1]), _g(c.normal[i, 0]), _g(c.normal[i, 1]),
-                     _g(c.depth[i]), _g(c.push_a[i, 0]), _g(c.push_a[i, 1]),
-                     _g(c.push_b[i, 0]), _g(c.push_b[i, 1]), _g(c.impulse[i]),
-                     _g(c.tangent_impulse[i]), _g(c.restitution[i])))
+        rows.append(
+            (
+                str(i),
+                str(int(c.substep[i])),
+                f"{a}:{names[a]}",
+                f"{b}:{names[b]}",
+                str(int(c.slot[i])),
+                str(int(c.feature[i])),
+                _g(c.point[i, 0]),
+                _g(c.point[i, 1]),
+                _g(c.normal[i, 0]),
+                _g(c.normal[i, 1]),
+                _g(c.depth[i]),
+                _g(c.push_a[i, 0]),
+                _g(c.push_a[i, 1]),
+                _g(c.push_b[i, 0]),
+                _g(c.push_b[i, 1]),
+                _g(c.impulse[i]),
+                _g(c.tangent_impulse[i]),
+                _g(c.restitution[i]),
+            )
+        )
     widths = [max(len(h), *(len(row[j]) for row in rows)) for j, h in enumerate(_COLUMNS)]
     print("  ".join(h.rjust(wd) for h, wd in zip(_COLUMNS, widths)))
     for row in rows:
@@ -132,8 +179,11 @@ def cmd_recover(args: argparse.Namespace) -> int:
     if os.path.abspath(args.log) == os.path.abspath(args.out):
         raise LogError("the output must be a different file from the input")
     kept, last = recover(args.log, args.out)
-    print(f"recovered {kept} step(s)" + ("" if last is None else f" (up to step {last})")
-          + f" into {args.out}")
+    print(
+        f"recovered {kept} step(s)"
+        + ("" if last is None else f" (up to step {last})")
+        + f" into {args.out}"
+    )
     return 0
 
 

@@ -16,12 +16,16 @@ from isaac.scene import load_scene
 def register(subparsers) -> None:
     run = subparsers.add_parser("run", help="run a scene (optionally recording it)")
     run.add_argument("scene", help="scene YAML file")
-    run.add_argument("--steps", type=int, default=None, help="number of steps (default: the scene's world.steps)")
+    run.add_argument(
+        "--steps", type=int, default=None, help="number of steps (default: the scene's world.steps)"
+    )
     run.add_argument("--mcap", metavar="OUT.mcap", help="record the run to this MCAP log")
     run.add_argument("--rrd", metavar="OUT.rrd", help="record the run to this Rerun recording")
     run.add_argument("--quiet", action="store_true", help="no progress bar")
     run.add_argument("--verbose", action="store_true", help="also print start-up and compile time")
-    run.add_argument("--profile", action="store_true", help="print time spent in each stage of the step")
+    run.add_argument(
+        "--profile", action="store_true", help="print time spent in each stage of the step"
+    )
     run.set_defaults(func=cmd_run)
 
     check = subparsers.add_parser("check", help="validate a scene and print its expanded size")
@@ -33,8 +37,10 @@ def cmd_check(args: argparse.Namespace) -> int:
     scene = load_scene(args.scene)
     concrete = sum(b.concrete for b in scene.bodies)
     w = scene.world
-    print(f"{args.scene}: ok: scene {scene.name!r}, {len(scene.bodies)} bodies "
-          f"({concrete} concrete), dt {w.dt} s, {w.steps} steps, fidelity {w.fidelity}")
+    print(
+        f"{args.scene}: ok: scene {scene.name!r}, {len(scene.bodies)} bodies "
+        f"({concrete} concrete), dt {w.dt} s, {w.steps} steps, fidelity {w.fidelity}"
+    )
     return 0
 
 
@@ -50,7 +56,9 @@ class _StopRequest:
 
 
 def cmd_run(args: argparse.Namespace) -> int:
-    from isaac.engine.simulation import Simulation  # imported here: compiling kernels is not needed for --help
+    from isaac.engine.simulation import (
+        Simulation,
+    )  # imported here: compiling kernels is not needed for --help
 
     started = time.perf_counter()
     scene = load_scene(args.scene)
@@ -60,10 +68,12 @@ def cmd_run(args: argparse.Namespace) -> int:
     sim = Simulation(scene)
     if args.profile:
         from isaac.app.profile import enable_profiling
+
         profiler = enable_profiling()
     recorder = None
     if args.mcap or args.rrd:
         from recorder import Recorder
+
         for out in (args.mcap, args.rrd):
             if out:
                 Path(out).parent.mkdir(parents=True, exist_ok=True)
@@ -79,6 +89,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     progress = None
     if not args.quiet and sys.stderr.isatty():
         from tqdm import tqdm
+
         progress = tqdm(total=steps, unit="step", desc=scene.name, leave=False)
     stop = _StopRequest()
     previous = {sig: signal.signal(sig, stop) for sig in (signal.SIGTERM, signal.SIGINT)}
@@ -126,18 +137,29 @@ def cmd_run(args: argparse.Namespace) -> int:
     elapsed = loop_end - (first_step_at or loop_start)
     rate = timed_steps / elapsed if timed_steps > 0 and elapsed > 0 else 0.0
     energy_end = _energy(sim, last)
-    print(f"scene {scene.name!r}: {taken} steps of {scene.world.dt} s, {sim.n_bodies} bodies, "
-          f"fidelity {scene.world.fidelity}")
-    print(f"  contacts seen {contacts_seen}, max depth {max_depth:.6g} m, "
-          + (f"{rate:.1f} steps/s ({1e3 / rate:.3f} ms/step, after the first step)" if rate
-             else "too few steps to measure a rate"))
+    print(
+        f"scene {scene.name!r}: {taken} steps of {scene.world.dt} s, {sim.n_bodies} bodies, "
+        f"fidelity {scene.world.fidelity}"
+    )
+    print(
+        f"  contacts seen {contacts_seen}, max depth {max_depth:.6g} m, "
+        + (
+            f"{rate:.1f} steps/s ({1e3 / rate:.3f} ms/step, after the first step)"
+            if rate
+            else "too few steps to measure a rate"
+        )
+    )
     print(f"  energy (kinetic + potential) start {energy_start:.6g} J, end {energy_end:.6g} J")
     if recorder:
-        print(f"  recording: files finished {finished_files:.2f} s after the last step (the "
-              f"writers' last steps, summary, index)")
+        print(
+            f"  recording: files finished {finished_files:.2f} s after the last step (the "
+            f"writers' last steps, summary, index)"
+        )
     if args.verbose and first_step_at is not None:
-        print(f"  start-up to first step {first_step_at - started:.3f} s "
-              f"(includes loading or compiling the kernels)")
+        print(
+            f"  start-up to first step {first_step_at - started:.3f} s "
+            f"(includes loading or compiling the kernels)"
+        )
     if args.profile:
         print(profiler.report(taken))
     for label, out in (("MCAP log", args.mcap), ("Rerun recording", args.rrd)):
@@ -145,9 +167,11 @@ def cmd_run(args: argparse.Namespace) -> int:
             print(f"  {label}: {out}")
     if stopped:
         kind, message = stopped
-        print(f"isaac run: {'error: ' if kind == 'error' else ''}{message}; "
-              f"stopped at step {sim.step_index}, the steps before it are recorded",
-              file=sys.stderr)
+        print(
+            f"isaac run: {'error: ' if kind == 'error' else ''}{message}; "
+            f"stopped at step {sim.step_index}, the steps before it are recorded",
+            file=sys.stderr,
+        )
         return 3 if kind == "error" else 130
     return 0
 

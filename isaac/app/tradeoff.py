@@ -42,16 +42,17 @@ from pathlib import Path
 import numpy as np
 
 from isaac.engine import diagnostics
-from isaac.errors import IsaacError, SceneError, SimulationError
 from isaac.engine.records import Contacts, StepRecord
+from isaac.errors import IsaacError, SceneError, SimulationError
 from isaac.scene import PRESETS, Scene, WorldSettings, load_scene, load_scene_text
 
 PRESET_ORDER = ("seed", "fast", "balanced", "accurate")
 DEFAULT_DT_FACTORS = (2.0, 1.0, 0.5)  # the default dt axis: the scene's dt times these
 REFERENCE_DT_DIVISOR = 8  # default reference: `accurate` at the scene's dt / 8
 # world settings a grid axis may vary (dt and preset are axes too)
-SETTING_KEYS = tuple(f.name for f in fields(WorldSettings)
-                     if f.name not in ("gravity", "dt", "steps", "fidelity"))
+SETTING_KEYS = tuple(
+    f.name for f in fields(WorldSettings) if f.name not in ("gravity", "dt", "steps", "fidelity")
+)
 # a body "tunneled" when its centre's path crossed a concrete body (see `_crossed_concrete`)
 
 
@@ -60,6 +61,7 @@ class TradeoffError(IsaacError):
 
 
 # --- grid -----------------------------------------------------------------------------------
+
 
 @dataclass(frozen=True)
 class GridPoint:
@@ -93,8 +95,10 @@ def parse_dt(text: str, scene_dt: float) -> float:
         else:
             value = float(Fraction(text)) if "/" in text else float(text)
     except (ValueError, ZeroDivisionError):
-        raise TradeoffError(f"--grid dt: cannot read {text!r} as a time step (use 0.01, 1/60 or "
-                            f"x2 for twice the scene's dt)") from None
+        raise TradeoffError(
+            f"--grid dt: cannot read {text!r} as a time step (use 0.01, 1/60 or "
+            f"x2 for twice the scene's dt)"
+        ) from None
     if not (0.0 < value <= 1.0):
         raise TradeoffError(f"--grid dt: {text!r} = {value!r} s is out of range (0, 1]")
     return value
@@ -104,8 +108,9 @@ def _check_setting(key: str, raw: str):
     """Read and validate one world-setting value through the scene loader (same rules and
     messages as a scene file)."""
     try:
-        scene = load_scene_text(f"world: {{{key}: {raw}}}\nbodies: [{{shape: {{box: [1, 1]}}}}]",
-                                source=f"--grid {key}")
+        scene = load_scene_text(
+            f"world: {{{key}: {raw}}}\nbodies: [{{shape: {{box: [1, 1]}}}}]", source=f"--grid {key}"
+        )
     except SceneError as exc:
         raise TradeoffError(str(exc)) from None
     return getattr(scene.world, key)
@@ -135,8 +140,10 @@ def parse_grid(specs: list[str] | None, scene_dt: float) -> list[GridPoint]:
             if key == "preset":
                 for v in items:
                     if v not in PRESETS:
-                        raise TradeoffError(f"--grid preset: unknown preset {v!r} "
-                                            f"(valid: {', '.join(PRESET_ORDER)})")
+                        raise TradeoffError(
+                            f"--grid preset: unknown preset {v!r} "
+                            f"(valid: {', '.join(PRESET_ORDER)})"
+                        )
                 axes[key] = items
             elif key == "dt":
                 axes[key] = [parse_dt(v, scene_dt) for v in items]
@@ -161,6 +168,7 @@ def parse_grid(specs: list[str] | None, scene_dt: float) -> list[GridPoint]:
 
 # --- trajectories ---------------------------------------------------------------------------
 
+
 @dataclass
 class Trajectory:
     """A run sampled at common times.
@@ -182,10 +190,16 @@ class Trajectory:
     error: str | None = None
 
     def record(self, k: int) -> StepRecord:
-        return StepRecord(step=k, time=float(self.times[k]), position=self.position[k],
-                          angle=self.angle[k], velocity=self.velocity[k],
-                          angular_velocity=self.angular_velocity[k], exists=self.exists[k],
-                          contacts=Contacts.empty())
+        return StepRecord(
+            step=k,
+            time=float(self.times[k]),
+            position=self.position[k],
+            angle=self.angle[k],
+            velocity=self.velocity[k],
+            angular_velocity=self.angular_velocity[k],
+            exists=self.exists[k],
+            contacts=Contacts.empty(),
+        )
 
 
 def _concrete_planes(model, state) -> list[tuple[np.ndarray, np.ndarray]]:
@@ -244,11 +258,14 @@ def simulate(scene: Scene, times: np.ndarray, *, check: bool = True) -> Trajecto
     sim = Simulation(scene)
     dt = scene.world.dt
     n, s_count = sim.n_bodies, times.shape[0]
-    out = Trajectory(times=times, position=np.full((s_count, n, 2), np.nan),
-                     velocity=np.full((s_count, n, 2), np.nan),
-                     angle=np.full((s_count, n), np.nan),
-                     angular_velocity=np.full((s_count, n), np.nan),
-                     exists=np.zeros((s_count, n), dtype=bool))
+    out = Trajectory(
+        times=times,
+        position=np.full((s_count, n, 2), np.nan),
+        velocity=np.full((s_count, n, 2), np.nan),
+        angle=np.full((s_count, n), np.nan),
+        angular_velocity=np.full((s_count, n), np.nan),
+        exists=np.zeros((s_count, n), dtype=bool),
+    )
     # sample k lies between steps lo[k] and lo[k] + 1, at fraction frac[k]
     where = times / dt
     lo = np.floor(where + 1e-9).astype(np.int64)
@@ -345,6 +362,7 @@ def warm_up(scene: Scene) -> None:
 
 # --- the analytic reference -----------------------------------------------------------------
 
+
 def _world_vertices(body) -> np.ndarray:
     """Vertices (m, world) of a body at its starting pose, about its centroid."""
     from isaac.scene import polygon
@@ -353,16 +371,18 @@ def _world_vertices(body) -> np.ndarray:
     _, centroid, _ = polygon.mass_properties(raw)
     c, s = math.cos(body.angle), math.sin(body.angle)
     local = raw - centroid
-    return np.column_stack((c * local[:, 0] - s * local[:, 1],
-                            s * local[:, 0] + c * local[:, 1])) + np.asarray(body.position)
+    return np.column_stack(
+        (c * local[:, 0] - s * local[:, 1], s * local[:, 0] + c * local[:, 1])
+    ) + np.asarray(body.position)
 
 
 def _combine(rule: str, x: float, y: float) -> float:
     return {"max": max(x, y), "min": min(x, y), "mean": 0.5 * (x + y), "product": x * y}[rule]
 
 
-def _flat_extreme(verts: np.ndarray, axis: int, top: bool, tol: float) -> tuple[float, float,
-                                                                                float] | None:
+def _flat_extreme(
+    verts: np.ndarray, axis: int, top: bool, tol: float
+) -> tuple[float, float, float] | None:
     """The extreme coordinate along `axis` if it is taken by a whole edge (two or more vertices
     within `tol`): (coordinate, low, high) of that edge's extent along the other axis."""
     coord = verts[:, axis]
@@ -399,8 +419,13 @@ def analytic_model(scene: Scene) -> str | None:
         tol = 1e-9 * (1.0 + float(np.abs(vb).max()))
         bottom = _flat_extreme(vb, 1, False, tol)
         top = _flat_extreme(vg, 1, True, tol)
-        if (bottom and top and body.angular_velocity == 0.0 and bottom[0] >= top[0] - tol
-                and (body.velocity[0] == 0.0 or not w.friction)):
+        if (
+            bottom
+            and top
+            and body.angular_velocity == 0.0
+            and bottom[0] >= top[0] - tol
+            and (body.velocity[0] == 0.0 or not w.friction)
+        ):
             # the flat bottom must stay over the flat top for the whole run
             t_end = w.steps * w.dt
             shift = body.velocity[0] * t_end
@@ -412,17 +437,25 @@ def analytic_model(scene: Scene) -> str | None:
         va, vb = _world_vertices(a), _world_vertices(b)
         tol = 1e-9 * (1.0 + float(max(np.abs(va).max(), np.abs(vb).max())))
         face_a, face_b = _flat_extreme(va, 0, True, tol), _flat_extreme(vb, 0, False, tol)
-        if (face_a and face_b and a.velocity[1] == 0.0 and b.velocity[1] == 0.0
-                and a.angular_velocity == 0.0 and b.angular_velocity == 0.0
-                and abs(a.position[1] - b.position[1]) <= tol
-                and abs(face_a[1] + face_a[2] - 2 * a.position[1]) <= tol
-                and abs(face_b[1] + face_b[2] - 2 * b.position[1]) <= tol
-                and face_a[0] <= face_b[0] + tol):
+        if (
+            face_a
+            and face_b
+            and a.velocity[1] == 0.0
+            and b.velocity[1] == 0.0
+            and a.angular_velocity == 0.0
+            and b.angular_velocity == 0.0
+            and abs(a.position[1] - b.position[1]) <= tol
+            and abs(face_a[1] + face_a[2] - 2 * a.position[1]) <= tol
+            and abs(face_b[1] + face_b[2] - 2 * b.position[1]) <= tol
+            and face_a[0] <= face_b[0] + tol
+        ):
             found = "head_on"
     if declared is not None and declared != found:
         seen = "no known closed form" if found is None else f"the closed form {found!r}"
-        raise TradeoffError(f"the scene declares analytic model {declared!r} but its bodies fit "
-                            f"{seen} (known: {', '.join(ANALYTIC_MODELS)})")
+        raise TradeoffError(
+            f"the scene declares analytic model {declared!r} but its bodies fit "
+            f"{seen} (known: {', '.join(ANALYTIC_MODELS)})"
+        )
     return found
 
 
@@ -430,9 +463,11 @@ def analytic_trajectory(scene: Scene, times: np.ndarray) -> Trajectory:
     """The closed-form motion of an `analytic_model` scene at `times` (s)."""
     kind = analytic_model(scene)
     if kind is None:
-        raise TradeoffError("--reference analytic: no closed form known for this scene (known: "
-                            "a lone body in flight, a flat drop on level concrete ground, a "
-                            "1D head-on hit of two bodies without gravity)")
+        raise TradeoffError(
+            "--reference analytic: no closed form known for this scene (known: "
+            "a lone body in flight, a flat drop on level concrete ground, a "
+            "1D head-on hit of two bodies without gravity)"
+        )
     from isaac.engine.world import build_model
 
     model = build_model(scene)
@@ -449,8 +484,9 @@ def analytic_trajectory(scene: Scene, times: np.ndarray) -> Trajectory:
         if b.concrete:
             continue
         # free flight: x = x0 + v0 t + g t^2 / 2, angle = angle0 + w t
-        pos[:, i] = (np.asarray(b.position) + np.outer(times, b.velocity)
-                     + 0.5 * np.outer(times * times, g))
+        pos[:, i] = (
+            np.asarray(b.position) + np.outer(times, b.velocity) + 0.5 * np.outer(times * times, g)
+        )
         vel[:, i] = np.asarray(b.velocity) + np.outer(times, g)
         ang[:, i] = b.angle + b.angular_velocity * times
         angvel[:, i] = b.angular_velocity
@@ -460,13 +496,17 @@ def analytic_trajectory(scene: Scene, times: np.ndarray) -> Trajectory:
         body = scene.bodies[i]
         e = _combine(w.restitution_rule, body.restitution, ground.restitution)
         gy = -w.gravity[1]
-        rest_y = body.position[1] - (_world_vertices(body)[:, 1].min()
-                                     - _world_vertices(ground)[:, 1].max())
-        pos[:, i, 1], vel[:, i, 1] = _bounce_y(body.position[1], body.velocity[1], rest_y, gy, e,
-                                               w.restitution_threshold, times)
+        rest_y = body.position[1] - (
+            _world_vertices(body)[:, 1].min() - _world_vertices(ground)[:, 1].max()
+        )
+        pos[:, i, 1], vel[:, i, 1] = _bounce_y(
+            body.position[1], body.velocity[1], rest_y, gy, e, w.restitution_threshold, times
+        )
     elif kind == "head_on":
-        ia, ib = sorted((k for k, b in enumerate(scene.bodies) if not b.concrete),
-                        key=lambda k: scene.bodies[k].position[0])
+        ia, ib = sorted(
+            (k for k, b in enumerate(scene.bodies) if not b.concrete),
+            key=lambda k: scene.bodies[k].position[0],
+        )
         a, b = scene.bodies[ia], scene.bodies[ib]
         gap = _world_vertices(b)[:, 0].min() - _world_vertices(a)[:, 0].max()
         closing = a.velocity[0] - b.velocity[0]
@@ -486,12 +526,14 @@ def analytic_trajectory(scene: Scene, times: np.ndarray) -> Trajectory:
                 pos[after, k, 0] = x_hit + v2 * (times[after] - t_hit)
                 vel[after, k, 0] = v2
     exists = np.ones((s_count, n), dtype=bool)
-    return Trajectory(times=times, position=pos, velocity=vel, angle=ang,
-                      angular_velocity=angvel, exists=exists)
+    return Trajectory(
+        times=times, position=pos, velocity=vel, angle=ang, angular_velocity=angvel, exists=exists
+    )
 
 
-def _bounce_y(y0: float, v0: float, rest_y: float, g: float, e: float, threshold: float,
-              times: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def _bounce_y(
+    y0: float, v0: float, rest_y: float, g: float, e: float, threshold: float, times: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
     """Height and vertical velocity of a body bouncing on a floor: free fall under g (m/s^2,
     downward) until the centre reaches `rest_y`, then the speed is reversed and scaled by e
     (zero when the impact speed is below `threshold`); at rest once a bounce is too small."""
@@ -515,24 +557,26 @@ def _bounce_y(y0: float, v0: float, rest_y: float, g: float, e: float, threshold
 
 # --- metrics --------------------------------------------------------------------------------
 
+
 def _series(scene: Scene, model, traj: Trajectory) -> dict[str, np.ndarray]:
     g = scene.world.gravity
     energy, momentum = [], []
     for k in range(traj.times.shape[0]):
         rec = traj.record(k)
-        energy.append(diagnostics.kinetic_energy(model, rec)
-                      + diagnostics.potential_energy(model, rec, g))
+        energy.append(
+            diagnostics.kinetic_energy(model, rec) + diagnostics.potential_energy(model, rec, g)
+        )
         momentum.append(diagnostics.linear_momentum(model, rec))
     weights = np.where(traj.exists & ~model.concrete, model.mass, 0.0)  # (S, n)
     total = weights.sum(axis=1, keepdims=True)
     with np.errstate(invalid="ignore", divide="ignore"):
         com = np.einsum("sn,snd->sd", weights, np.nan_to_num(traj.position)) / total
-    return dict(energy=np.array(energy), momentum=np.array(momentum), com=com,
-                mass=total[:, 0])
+    return dict(energy=np.array(energy), momentum=np.array(momentum), com=com, mass=total[:, 0])
 
 
-def compare(scene: Scene, model, run: Trajectory, ref: Trajectory,
-            ref_series: dict | None = None) -> dict[str, float]:
+def compare(
+    scene: Scene, model, run: Trajectory, ref: Trajectory, ref_series: dict | None = None
+) -> dict[str, float]:
     """Error measures of `run` against `ref` (same sample times).
 
     rms_error_m: sqrt(mean over moving bodies and sample times of |x_run - x_ref|^2).
@@ -576,9 +620,23 @@ def compare(scene: Scene, model, run: Trajectory, ref: Trajectory,
 
 # --- the whole measurement ------------------------------------------------------------------
 
-COLUMNS = ("setting", "dt", "ms_per_step", "steps_per_s", "ms_per_sim_s", "rms_error_m",
-           "max_error_m", "energy_drift", "energy_error", "com_error_m", "momentum_error_mps",
-           "max_penetration_m", "tunneled", "diverged", "pareto")
+COLUMNS = (
+    "setting",
+    "dt",
+    "ms_per_step",
+    "steps_per_s",
+    "ms_per_sim_s",
+    "rms_error_m",
+    "max_error_m",
+    "energy_drift",
+    "energy_error",
+    "com_error_m",
+    "momentum_error_mps",
+    "max_penetration_m",
+    "tunneled",
+    "diverged",
+    "pareto",
+)
 
 
 @dataclass
@@ -600,15 +658,30 @@ def _pareto(points: list[tuple[float, float]]) -> list[bool]:
         if not (math.isfinite(c) and math.isfinite(e)):
             marks.append(False)
             continue
-        dominated = any(j != i and math.isfinite(c2) and math.isfinite(e2) and c2 <= c and e2 <= e
-                        and (c2 < c or e2 < e) for j, (c2, e2) in enumerate(points))
+        dominated = any(
+            j != i
+            and math.isfinite(c2)
+            and math.isfinite(e2)
+            and c2 <= c
+            and e2 <= e
+            and (c2 < c or e2 < e)
+            for j, (c2, e2) in enumerate(points)
+        )
         marks.append(not dominated)
     return marks
 
 
-def measure(scene: Scene, grid: list[GridPoint], *, reference: str = "accurate",
-            reference_dt: float | None = None, duration: float | None = None, repeats: int = 3,
-            min_seconds: float = MIN_TIMED_SECONDS, progress: bool = False) -> TradeoffResult:
+def measure(
+    scene: Scene,
+    grid: list[GridPoint],
+    *,
+    reference: str = "accurate",
+    reference_dt: float | None = None,
+    duration: float | None = None,
+    repeats: int = 3,
+    min_seconds: float = MIN_TIMED_SECONDS,
+    progress: bool = False,
+) -> TradeoffResult:
     """Run every grid point against the reference and measure cost and error.
 
     reference: "accurate" (the `accurate` preset at `reference_dt`, default the smaller of the
@@ -630,15 +703,23 @@ def measure(scene: Scene, grid: list[GridPoint], *, reference: str = "accurate",
     sample_dt = max(p.dt for p in grid)
     times = sample_times(duration, sample_dt)
     if times.shape[0] < 2:
-        raise TradeoffError(f"the run ({duration} s) is shorter than the coarsest dt "
-                            f"({sample_dt} s): nothing to compare")
+        raise TradeoffError(
+            f"the run ({duration} s) is shorter than the coarsest dt "
+            f"({sample_dt} s): nothing to compare"
+        )
     duration = float(times[-1])
     model = build_model(scene)
     bar = None
     if progress:
         from tqdm import tqdm
-        bar = tqdm(total=1 + len(grid) * (1 + repeats), unit="run", desc=scene.name,
-                   leave=False, file=sys.stderr)
+
+        bar = tqdm(
+            total=1 + len(grid) * (1 + repeats),
+            unit="run",
+            desc=scene.name,
+            leave=False,
+            file=sys.stderr,
+        )
     try:
         if reference == "analytic":
             kind = analytic_model(scene)
@@ -647,8 +728,7 @@ def measure(scene: Scene, grid: list[GridPoint], *, reference: str = "accurate",
             ref_row = dict(setting="analytic", dt=0.0)
             ref_cost = math.nan
         elif reference == "accurate":
-            ref_dt = reference_dt or min(w.dt / REFERENCE_DT_DIVISOR,
-                                         min(p.dt for p in grid) / 4)
+            ref_dt = reference_dt or min(w.dt / REFERENCE_DT_DIVISOR, min(p.dt for p in grid) / 4)
             ref_point = GridPoint("accurate (reference)", ref_dt, (("preset", "accurate"),))
             ref_scene = replace(scene, world=ref_point.world(w, duration))
             if bar:
@@ -659,8 +739,12 @@ def measure(scene: Scene, grid: list[GridPoint], *, reference: str = "accurate",
                 raise TradeoffError(f"the reference run failed: {ref.error}")
             ref_cost = statistics.median(time_runs(ref_scene, 1, min_seconds))
             ref_label = f"accurate, dt={ref_dt:.6g} s"
-            ref_row = dict(setting=ref_point.label, dt=ref_dt,
-                           max_penetration_m=ref.max_depth, tunneled=len(ref.tunneled))
+            ref_row = dict(
+                setting=ref_point.label,
+                dt=ref_dt,
+                max_penetration_m=ref.max_depth,
+                tunneled=len(ref.tunneled),
+            )
         else:
             raise TradeoffError(f"--reference must be accurate or analytic, got {reference!r}")
         if bar:
@@ -680,9 +764,14 @@ def measure(scene: Scene, grid: list[GridPoint], *, reference: str = "accurate",
             run = simulate(run_scene, times)
             row = dict(setting=point.label, dt=point.dt)
             row.update(compare(scene, model, run, ref, ref_series))
-            row.update(max_penetration_m=run.max_depth, tunneled=len(run.tunneled),
-                       diverged=run.error or "", ms_per_step=math.nan, steps_per_s=math.nan,
-                       ms_per_sim_s=math.nan)
+            row.update(
+                max_penetration_m=run.max_depth,
+                tunneled=len(run.tunneled),
+                diverged=run.error or "",
+                ms_per_step=math.nan,
+                steps_per_s=math.nan,
+                ms_per_sim_s=math.nan,
+            )
             rows.append(row)
             timed.append((row, run_scene, []) if run.error is None else None)
             if bar:
@@ -710,17 +799,25 @@ def measure(scene: Scene, grid: list[GridPoint], *, reference: str = "accurate",
     for row, mark in zip(rows, marks):
         row["pareto"] = "*" if mark else ""
     ref_row.setdefault("pareto", "")
-    return TradeoffResult(scene=scene.name, reference=ref_label, duration=duration,
-                          sample_dt=sample_dt, rows=rows, reference_row=ref_row)
+    return TradeoffResult(
+        scene=scene.name,
+        reference=ref_label,
+        duration=duration,
+        sample_dt=sample_dt,
+        rows=rows,
+        reference_row=ref_row,
+    )
 
 
 def _cost(seconds: float, steps: int, dt: float) -> dict[str, float]:
     ms_per_step = 1e3 * seconds / steps
-    return dict(ms_per_step=ms_per_step, steps_per_s=1e3 / ms_per_step,
-                ms_per_sim_s=ms_per_step / dt)
+    return dict(
+        ms_per_step=ms_per_step, steps_per_s=1e3 / ms_per_step, ms_per_sim_s=ms_per_step / dt
+    )
 
 
 # --- output ---------------------------------------------------------------------------------
+
 
 def _fmt(value, key: str) -> str:
     if value is None or value == "":
@@ -751,12 +848,21 @@ def write_csv(result: TradeoffResult, path) -> None:
             writer.writerow((result.scene, result.reference, *values))
 
 
-TABLE_COLUMNS = (("setting", "setting"), ("dt", "dt s"), ("ms_per_step", "ms/step"),
-                 ("steps_per_s", "steps/s"), ("ms_per_sim_s", "ms/sim-s"),
-                 ("rms_error_m", "RMS err m"), ("energy_drift", "E drift"),
-                 ("energy_error", "E err"), ("com_error_m", "COM err m"),
-                 ("momentum_error_mps", "P err m/s"), ("max_penetration_m", "max pen m"),
-                 ("tunneled", "tunnel"), ("pareto", "pareto"))
+TABLE_COLUMNS = (
+    ("setting", "setting"),
+    ("dt", "dt s"),
+    ("ms_per_step", "ms/step"),
+    ("steps_per_s", "steps/s"),
+    ("ms_per_sim_s", "ms/sim-s"),
+    ("rms_error_m", "RMS err m"),
+    ("energy_drift", "E drift"),
+    ("energy_error", "E err"),
+    ("com_error_m", "COM err m"),
+    ("momentum_error_mps", "P err m/s"),
+    ("max_penetration_m", "max pen m"),
+    ("tunneled", "tunnel"),
+    ("pareto", "pareto"),
+)
 
 
 def format_table(result: TradeoffResult, *, markdown: bool = False) -> str:
@@ -787,9 +893,12 @@ def plot(result: TradeoffResult, path, *, second: str = "max_penetration_m") -> 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    titles = {"rms_error_m": "trajectory RMS error vs reference (m)",
-              "max_penetration_m": "max penetration (m)", "energy_error": "energy error (rel.)",
-              "com_error_m": "centre-of-mass error (m)"}
+    titles = {
+        "rms_error_m": "trajectory RMS error vs reference (m)",
+        "max_penetration_m": "max penetration (m)",
+        "energy_error": "energy error (rel.)",
+        "com_error_m": "centre-of-mass error (m)",
+    }
     fig, axes = plt.subplots(1, 2, figsize=(10.5, 4.2), dpi=90)
     labels = list(dict.fromkeys(r["setting"] for r in result.rows))
     dts = sorted({r["dt"] for r in result.rows}, reverse=True)
@@ -807,9 +916,16 @@ def plot(result: TradeoffResult, path, *, second: str = "max_penetration_m") -> 
                 continue
             e_plot = max(e, floor)
             li, di = labels.index(r["setting"]), dts.index(r["dt"])
-            ax.scatter(c, e_plot, marker=markers[li % len(markers)], s=55,
-                       color=cmap(di / max(1, len(dts) - 1) * 0.85), edgecolor="black",
-                       linewidth=0.5, zorder=3)
+            ax.scatter(
+                c,
+                e_plot,
+                marker=markers[li % len(markers)],
+                s=55,
+                color=cmap(di / max(1, len(dts) - 1) * 0.85),
+                edgecolor="black",
+                linewidth=0.5,
+                zorder=3,
+            )
             pts.append((c, e_plot))
         marks = _pareto(pts)
         front = sorted(p for p, m in zip(pts, marks) if m)
@@ -826,14 +942,36 @@ def plot(result: TradeoffResult, path, *, second: str = "max_penetration_m") -> 
         ax.grid(True, which="both", alpha=0.25)
     from matplotlib.lines import Line2D
 
-    handles = [Line2D([], [], marker=markers[i % len(markers)], ls="", color="grey",
-                      markeredgecolor="black", label=lab) for i, lab in enumerate(labels)]
-    handles += [Line2D([], [], marker="o", ls="", color=cmap(i / max(1, len(dts) - 1) * 0.85),
-                       label=f"dt = {_dt_text(d)}") for i, d in enumerate(dts)]
+    handles = [
+        Line2D(
+            [],
+            [],
+            marker=markers[i % len(markers)],
+            ls="",
+            color="grey",
+            markeredgecolor="black",
+            label=lab,
+        )
+        for i, lab in enumerate(labels)
+    ]
+    handles += [
+        Line2D(
+            [],
+            [],
+            marker="o",
+            ls="",
+            color=cmap(i / max(1, len(dts) - 1) * 0.85),
+            label=f"dt = {_dt_text(d)}",
+        )
+        for i, d in enumerate(dts)
+    ]
     handles.append(Line2D([], [], ls="--", color="crimson", label="Pareto front"))
     axes[1].legend(handles=handles, fontsize=7, loc="best", framealpha=0.8)
-    fig.suptitle(f"{result.scene}: error vs cost (reference: {result.reference}; "
-                 f"{result.duration:.3g} s simulated)", fontsize=10)
+    fig.suptitle(
+        f"{result.scene}: error vs cost (reference: {result.reference}; "
+        f"{result.duration:.3g} s simulated)",
+        fontsize=10,
+    )
     fig.tight_layout()
     fig.savefig(path, dpi=90)
     plt.close(fig)
@@ -848,36 +986,64 @@ def _dt_text(dt: float) -> str:
 
 # --- command line ---------------------------------------------------------------------------
 
+
 def register(subparsers) -> None:
     p = subparsers.add_parser(
-        "tradeoff", help="measure error against cost of fidelity settings on a scene",
+        "tradeoff",
+        help="measure error against cost of fidelity settings on a scene",
         description="Run SCENE under a grid of settings (default: the presets x the scene's dt "
-                    "times 2, 1 and 1/2), each against a reference, and report cost (ms/step, "
-                    "median of repeats) and error. Writes a CSV and a PNG (error vs cost, "
-                    "Pareto front marked).")
+        "times 2, 1 and 1/2), each against a reference, and report cost (ms/step, "
+        "median of repeats) and error. Writes a CSV and a PNG (error vs cost, "
+        "Pareto front marked).",
+    )
     p.add_argument("scene", help="scene YAML file")
-    p.add_argument("--grid", action="append", metavar="KEY=V1,V2",
-                   help="a grid axis (repeatable; or several joined by ';'): preset=..., "
-                        "dt=1/60,1/120 (or x2 for twice the scene's dt), or any world setting "
-                        "(iterations=4,10, ccd=off,speculative, ...)")
-    p.add_argument("--reference", choices=("accurate", "analytic"), default=None,
-                   help="accurate: the accurate preset at a small dt (default, unless the scene "
-                        "declares `analytic:`); analytic: the closed form (free flight, a flat "
-                        "drop on level ground, a 1D head-on hit)")
-    p.add_argument("--reference-dt", type=float, default=None, metavar="S",
-                   help="dt of the accurate reference (default: the scene's dt / 8)")
-    p.add_argument("--duration", type=float, default=None, metavar="S",
-                   help="simulated seconds (default: the scene's steps x dt)")
+    p.add_argument(
+        "--grid",
+        action="append",
+        metavar="KEY=V1,V2",
+        help="a grid axis (repeatable; or several joined by ';'): preset=..., "
+        "dt=1/60,1/120 (or x2 for twice the scene's dt), or any world setting "
+        "(iterations=4,10, ccd=off,speculative, ...)",
+    )
+    p.add_argument(
+        "--reference",
+        choices=("accurate", "analytic"),
+        default=None,
+        help="accurate: the accurate preset at a small dt (default, unless the scene "
+        "declares `analytic:`); analytic: the closed form (free flight, a flat "
+        "drop on level ground, a 1D head-on hit)",
+    )
+    p.add_argument(
+        "--reference-dt",
+        type=float,
+        default=None,
+        metavar="S",
+        help="dt of the accurate reference (default: the scene's dt / 8)",
+    )
+    p.add_argument(
+        "--duration",
+        type=float,
+        default=None,
+        metavar="S",
+        help="simulated seconds (default: the scene's steps x dt)",
+    )
     p.add_argument("--repeats", type=int, default=3, help="timed runs per setting (median)")
-    p.add_argument("--min-time", type=float, default=MIN_TIMED_SECONDS, metavar="S",
-                   help="repeat short runs until this many seconds were timed (default "
-                        f"{MIN_TIMED_SECONDS})")
+    p.add_argument(
+        "--min-time",
+        type=float,
+        default=MIN_TIMED_SECONDS,
+        metavar="S",
+        help=f"repeat short runs until this many seconds were timed (default {MIN_TIMED_SECONDS})",
+    )
     p.add_argument("--csv", metavar="OUT.csv", help="CSV path (default: SCENE_tradeoff.csv here)")
     p.add_argument("--png", metavar="OUT.png", help="plot path (default: SCENE_tradeoff.png)")
     p.add_argument("--no-plot", action="store_true", help="do not write the plot")
-    p.add_argument("--second", default="max_penetration_m",
-                   choices=("max_penetration_m", "energy_error", "com_error_m"),
-                   help="error shown in the plot's second panel")
+    p.add_argument(
+        "--second",
+        default="max_penetration_m",
+        choices=("max_penetration_m", "energy_error", "com_error_m"),
+        help="error shown in the plot's second panel",
+    )
     p.add_argument("--markdown", action="store_true", help="print the table as Markdown")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=cmd_tradeoff)
@@ -887,17 +1053,26 @@ def cmd_tradeoff(args: argparse.Namespace) -> int:
     scene = load_scene(args.scene)
     grid = parse_grid(args.grid, scene.world.dt)
     reference = args.reference or ("analytic" if scene.analytic else "accurate")
-    result = measure(scene, grid, reference=reference, reference_dt=args.reference_dt,
-                     duration=args.duration, repeats=args.repeats, min_seconds=args.min_time,
-                     progress=not args.quiet and sys.stderr.isatty())
+    result = measure(
+        scene,
+        grid,
+        reference=reference,
+        reference_dt=args.reference_dt,
+        duration=args.duration,
+        repeats=args.repeats,
+        min_seconds=args.min_time,
+        progress=not args.quiet and sys.stderr.isatty(),
+    )
     stem = Path(args.scene).stem
     csv_path = Path(args.csv or f"{stem}_tradeoff.csv")
     csv_path.parent.mkdir(parents=True, exist_ok=True)
     write_csv(result, csv_path)
-    print(f"scene {result.scene!r}: {result.duration:.6g} s simulated, compared every "
-          f"{result.sample_dt:.6g} s; reference: {result.reference}; cost: median of "
-          f"{args.repeats} rounds of timed runs (at least {args.min_time} s each point) after "
-          f"a warm-up step")
+    print(
+        f"scene {result.scene!r}: {result.duration:.6g} s simulated, compared every "
+        f"{result.sample_dt:.6g} s; reference: {result.reference}; cost: median of "
+        f"{args.repeats} rounds of timed runs (at least {args.min_time} s each point) after "
+        f"a warm-up step"
+    )
     print(format_table(result, markdown=args.markdown))
     print(f"wrote {csv_path}")
     if not args.no_plot:

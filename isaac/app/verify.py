@@ -15,37 +15,64 @@ from replay.report import DEFAULT_MAX_REPORTED, Report, format_text, to_json
 
 
 def _common(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--from-step", type=int, metavar="K", default=None,
-                   help="start from the state logged at step K (every logged step is a keyframe)")
-    p.add_argument("--to-step", type=int, metavar="M", default=None,
-                   help="stop after step M")
-    p.add_argument("--tolerance", type=float, metavar="X", default=None,
-                   help="compare floats within |a - b| <= X * (1 + |a|) instead of bit for bit "
-                        "(for logs made with other versions or on other machines)")
-    p.add_argument("--all", action="store_true", dest="all_steps",
-                   help="go on after a divergence and list every differing step")
-    p.add_argument("--max-reported", type=int, default=DEFAULT_MAX_REPORTED, metavar="N",
-                   help=f"with --all, list at most N differing steps "
-                        f"(default {DEFAULT_MAX_REPORTED})")
-    p.add_argument("--json", metavar="OUT.json", default=None,
-                   help="also write the report as JSON to this file ('-' for stdout)")
+    p.add_argument(
+        "--from-step",
+        type=int,
+        metavar="K",
+        default=None,
+        help="start from the state logged at step K (every logged step is a keyframe)",
+    )
+    p.add_argument("--to-step", type=int, metavar="M", default=None, help="stop after step M")
+    p.add_argument(
+        "--tolerance",
+        type=float,
+        metavar="X",
+        default=None,
+        help="compare floats within |a - b| <= X * (1 + |a|) instead of bit for bit "
+        "(for logs made with other versions or on other machines)",
+    )
+    p.add_argument(
+        "--all",
+        action="store_true",
+        dest="all_steps",
+        help="go on after a divergence and list every differing step",
+    )
+    p.add_argument(
+        "--max-reported",
+        type=int,
+        default=DEFAULT_MAX_REPORTED,
+        metavar="N",
+        help=f"with --all, list at most N differing steps (default {DEFAULT_MAX_REPORTED})",
+    )
+    p.add_argument(
+        "--json",
+        metavar="OUT.json",
+        default=None,
+        help="also write the report as JSON to this file ('-' for stdout)",
+    )
 
 
 def register(subparsers) -> None:
     r = subparsers.add_parser(
-        "replay", help="re-simulate a log from its embedded scene and check it bit for bit",
+        "replay",
+        help="re-simulate a log from its embedded scene and check it bit for bit",
         description="Re-simulate LOG.mcap from the scene, settings and versions embedded in it "
-                    "and compare every logged /bodies, /contacts and /stats message with the "
-                    "re-simulated one. Exit 0 identical, 1 diverged, 2 bad file.")
-    r.add_argument("log", help="LOG.mcap (a truncated or .partial log is replayed up to its "
-                               "last complete step)")
+        "and compare every logged /bodies, /contacts and /stats message with the "
+        "re-simulated one. Exit 0 identical, 1 diverged, 2 bad file.",
+    )
+    r.add_argument(
+        "log",
+        help="LOG.mcap (a truncated or .partial log is replayed up to its last complete step)",
+    )
     _common(r)
     r.set_defaults(func=cmd_replay)
 
     d = subparsers.add_parser(
-        "diff", help="compare two logs of the same scene step by step",
+        "diff",
+        help="compare two logs of the same scene step by step",
         description="Compare A.mcap and B.mcap message by message (e.g. before and after a code "
-                    "change). Exit 0 identical, 1 different, 2 bad file.")
+        "change). Exit 0 identical, 1 different, 2 bad file.",
+    )
     d.add_argument("a", help="A.mcap")
     d.add_argument("b", help="B.mcap")
     _common(d)
@@ -78,9 +105,14 @@ def cmd_replay(args: argparse.Namespace) -> int:
     _check(args)
     from replay.compare import replay_log
 
-    report = replay_log(args.log, from_step=args.from_step, to_step=args.to_step,
-                        tolerance=args.tolerance, all_steps=args.all_steps,
-                        max_reported=args.max_reported)
+    report = replay_log(
+        args.log,
+        from_step=args.from_step,
+        to_step=args.to_step,
+        tolerance=args.tolerance,
+        all_steps=args.all_steps,
+        max_reported=args.max_reported,
+    )
     return _finish(report, args)
 
 
@@ -88,7 +120,13 @@ def cmd_diff(args: argparse.Namespace) -> int:
     _check(args)
     from replay.compare import diff_logs
 
-    report = diff_logs(args.a, args.b, from_step=args.from_step, to_step=args.to_step,
-                       tolerance=args.tolerance, all_steps=args.all_steps,
-                       max_reported=args.max_reported)
+    report = diff_logs(
+        args.a,
+        args.b,
+        from_step=args.from_step,
+        to_step=args.to_step,
+        tolerance=args.tolerance,
+        all_steps=args.all_steps,
+        max_reported=args.max_reported,
+    )
     return _finish(report, args)

@@ -80,8 +80,12 @@ def find_pairs(position, radius, aabb, expand, movable, exists, pair_a, pair_b):
             # bounding circles do not overlap; tested without branches (whether a candidate
             # passes is hard to predict), and the pair written either way: the next pair
             # found overwrites it
-            skip = ((t[q, 2] > hi_y) | (lo_y > t[q, 3]) | (moving + t[q, 7] == 0.0)
-                    | (dx * dx + dy * dy > both * both))
+            skip = (
+                (t[q, 2] > hi_y)
+                | (lo_y > t[q, 3])
+                | (moving + t[q, 7] == 0.0)
+                | (dx * dx + dy * dy > both * both)
+            )
             if count < capacity:
                 j = body[q]
                 pair_a[count] = min(i, j)

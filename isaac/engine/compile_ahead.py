@@ -2,17 +2,17 @@
 
 With an empty numba cache the first step compiles every kernel it reaches, one after the other,
 in this process: about 14 s on the 2-core benchmark machine, over half of it the impulse solver
-(`isaac.engine.solver.sequential.solve_sequential` and the kernels it calls, ~7.8 s; detection, push-out and
-integration make up the rest). `prepare` splits that work: a helper process compiles the solver
-into the on-disk cache while this process compiles the other stages, then this process waits
-for the helper and loads the solver from the cache at its first call.
+(`isaac.engine.solver.sequential.solve_sequential` and the kernels it calls, ~7.8 s; detection,
+push-out and integration make up the rest). `prepare` splits that work: a helper process compiles
+the solver into the on-disk cache while this process compiles the other stages, then this process
+waits for the helper and loads the solver from the cache at its first call.
 
 Both sides compile by running the stages on a two-box scene with the simulation's own world
-settings (built from the stages' own pieces, never through `Simulation`, which calls this): numba specialises on argument types only
-(dtypes, dimensions, layouts), never on sizes or values, so the kernels compiled for the small
-scene are the ones the real scene calls. Nothing here changes what a step computes; if the
-helper cannot start or fails, this process compiles the solver itself, as it would without it.
-A warm cache (the solver's index file exists) skips all of this.
+settings (built from the stages' own pieces, not through `Simulation`, which calls this): numba
+specialises on argument types only (dtypes, dimensions, layouts), never on sizes or values, so the
+kernels compiled for the small scene are the ones the real scene calls. Nothing here changes what a
+step computes; if the helper cannot start or fails, this process compiles the solver itself, as it
+would without it. A warm cache (the solver's index file exists) skips all of this.
 """
 
 from __future__ import annotations
@@ -54,9 +54,14 @@ class _SmallWorld:
         from isaac.engine.world import build_model, initial_state
         from isaac.scene import BodySpec, Scene
 
-        scene = Scene(name="compile-ahead", world=world, bodies=(
-            BodySpec(name="floor", vertices=_BOX, concrete=True),
-            BodySpec(name="box", vertices=_BOX, position=(0.0, 0.95))))
+        scene = Scene(
+            name="compile-ahead",
+            world=world,
+            bodies=(
+                BodySpec(name="floor", vertices=_BOX, concrete=True),
+                BodySpec(name="box", vertices=_BOX, position=(0.0, 0.95)),
+            ),
+        )
         self.dt = world.dt
         self.model = build_model(scene)
         self.settings = StepSettings.of(world)
@@ -79,8 +84,9 @@ def prepare(settings, world) -> None:
         from isaac.engine.step import step
 
         small = _SmallWorld(world)
-        step(small.model, small.settings, small.dt, small.state, small.work, small.cache,
-             solve=False)
+        step(
+            small.model, small.settings, small.dt, small.state, small.work, small.cache, solve=False
+        )
         diverged_body(small.state)
         helper.wait(timeout=HELPER_TIMEOUT_S)
     except BaseException as exc:  # Ctrl-C, a failure here, a stuck helper: no orphan left
@@ -91,14 +97,18 @@ def prepare(settings, world) -> None:
 
 
 def _start_helper(world) -> subprocess.Popen | None:
-    """`python -m isaac.engine.compile_ahead` with `world` pickled on its standard input, or None."""
+    """`python -m isaac.engine.compile_ahead`, `world` pickled on its standard input; or None."""
     root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
     env = dict(os.environ)
     env["PYTHONPATH"] = os.pathsep.join(p for p in (root, env.get("PYTHONPATH")) if p)
     try:
-        proc = subprocess.Popen([sys.executable, "-m", "isaac.engine.compile_ahead"],
-                                stdin=subprocess.PIPE, stdout=subprocess.DEVNULL,
-                                stderr=subprocess.DEVNULL, env=env)
+        proc = subprocess.Popen(
+            [sys.executable, "-m", "isaac.engine.compile_ahead"],
+            stdin=subprocess.PIPE,
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.DEVNULL,
+            env=env,
+        )
         with proc.stdin:
             proc.stdin.write(pickle.dumps(world, protocol=pickle.HIGHEST_PROTOCOL))
     except OSError:

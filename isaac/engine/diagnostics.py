@@ -51,9 +51,17 @@ def _sums(mass, inertia, concrete, exists, position, velocity, angular_velocity,
 
 def summary(model, record: StepRecord, gravity) -> Summary:
     """Energies and momenta of a record in one pass (see Summary for units and frames)."""
-    ke, pe, px, py, ang = _sums(model.mass, model.inertia, model.concrete, record.exists,
-                                record.position, record.velocity, record.angular_velocity,
-                                float(gravity[0]), float(gravity[1]))
+    ke, pe, px, py, ang = _sums(
+        model.mass,
+        model.inertia,
+        model.concrete,
+        record.exists,
+        record.position,
+        record.velocity,
+        record.angular_velocity,
+        float(gravity[0]),
+        float(gravity[1]),
+    )
     return Summary(ke, pe, (px, py), ang)
 
 
@@ -90,10 +98,19 @@ def all_finite(record: StepRecord) -> bool:
     """Whether every float of the record (state and contacts) is finite: one compiled pass,
     for the recorder's never-write-NaN check on every step."""
     c = record.contacts
-    arrays = (record.position, record.angle, record.velocity, record.angular_velocity, c.point,
-              c.normal, c.depth, c.push_a, c.push_b, c.impulse, c.tangent_impulse,
-              c.restitution)
+    arrays = (
+        record.position,
+        record.angle,
+        record.velocity,
+        record.angular_velocity,
+        c.point,
+        c.normal,
+        c.depth,
+        c.push_a,
+        c.push_b,
+        c.impulse,
+        c.tangent_impulse,
+        c.restitution,
+    )
     # flat float64 views (no copies for the engine's contiguous arrays): one tuple type
     return bool(_finite(tuple(np.ravel(np.asarray(a, dtype=np.float64)) for a in arrays)))
-
-

@@ -9,8 +9,9 @@ import numpy as np
 
 
 @numba.njit(cache=True, nogil=True)
-def transform(position, angle, exists, vertices_local, normals_local, vertex_count,
-              vertices, normals, aabb):
+def transform(
+    position, angle, exists, vertices_local, normals_local, vertex_count, vertices, normals, aabb
+):
     """Fill world vertices (n, V, 2), world edge normals (n, V, 2) and AABBs (n, 4) in place.
 
     Counter-clockwise rotation: x_world = x + cos(a) lx - sin(a) ly, y_world = y + sin(a) lx +

@@ -56,13 +56,22 @@ DIVERGED_ANGLE = 8.0  # rad: wrapped angles stay within pi
 def diverged_body(state) -> tuple[int, int]:
     """`first_diverged` of an `isaac.engine.world.State` against the DIVERGED_* bounds."""
     s = state
-    return first_diverged(s.position, s.angle, s.velocity, s.angular_velocity, s.exists,
-                          DIVERGED_POSITION, DIVERGED_SPEED, DIVERGED_ANGLE)
+    return first_diverged(
+        s.position,
+        s.angle,
+        s.velocity,
+        s.angular_velocity,
+        s.exists,
+        DIVERGED_POSITION,
+        DIVERGED_SPEED,
+        DIVERGED_ANGLE,
+    )
 
 
 @numba.njit(cache=True, nogil=True)
-def first_diverged(position, angle, velocity, angular_velocity, exists, position_limit,
-                   speed_limit, angle_limit):
+def first_diverged(
+    position, angle, velocity, angular_velocity, exists, position_limit, speed_limit, angle_limit
+):
     """(body index, field code) of the first existing body whose state is NaN, infinite or
     beyond the limits (m, m/s and rad/s, rad), or (-1, -1). Field codes: 0 position,
     1 velocity, 2 angle, 3 angular velocity. `not (x <= limit)` is also true for NaN."""

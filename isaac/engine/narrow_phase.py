@@ -75,8 +75,27 @@ def max_separation(vertices, normals, r, count_r, i, count_i):
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
-def _emit(row, a, b, feature, slot, px, py, nx, ny, depth, pair_depth,
-          c_a, c_b, c_feature, c_slot, c_point, c_normal, c_depth, c_pair_depth):
+def _emit(
+    row,
+    a,
+    b,
+    feature,
+    slot,
+    px,
+    py,
+    nx,
+    ny,
+    depth,
+    pair_depth,
+    c_a,
+    c_b,
+    c_feature,
+    c_slot,
+    c_point,
+    c_normal,
+    c_depth,
+    c_pair_depth,
+):
     """Write one contact row."""
     c_a[row] = a
     c_b[row] = b
@@ -91,10 +110,31 @@ def _emit(row, a, b, feature, slot, px, py, nx, ny, depth, pair_depth,
 
 
 @numba.njit(cache=True, nogil=True)
-def collide_pairs(pair_a, pair_b, n_pairs, vertices, normals, vertex_count, radius,
-                  velocity, angular_velocity, margin_time, margin_extra, two_points, hysteresis,
-                  prev_key, prev_feature,
-                  c_a, c_b, c_feature, c_slot, c_point, c_normal, c_depth, c_pair_depth):
+def collide_pairs(
+    pair_a,
+    pair_b,
+    n_pairs,
+    vertices,
+    normals,
+    vertex_count,
+    radius,
+    velocity,
+    angular_velocity,
+    margin_time,
+    margin_extra,
+    two_points,
+    hysteresis,
+    prev_key,
+    prev_feature,
+    c_a,
+    c_b,
+    c_feature,
+    c_slot,
+    c_point,
+    c_normal,
+    c_depth,
+    c_pair_depth,
+):
     """Contacts of every candidate pair, written row by row in pair order; returns the row count.
 
     margin_time: time (s) over which speculative contacts look ahead (0 turns ccd off);
@@ -122,9 +162,15 @@ def collide_pairs(pair_a, pair_b, n_pairs, vertices, normals, vertex_count, radi
         if margin_time > 0.0:
             dvx = velocity[b, 0] - velocity[a, 0]
             dvy = velocity[b, 1] - velocity[a, 1]
-            margin = margin_time * (np.sqrt(dvx * dvx + dvy * dvy)
-                                    + abs(angular_velocity[a]) * radius[a]
-                                    + abs(angular_velocity[b]) * radius[b]) + margin_extra
+            margin = (
+                margin_time
+                * (
+                    np.sqrt(dvx * dvx + dvy * dvy)
+                    + abs(angular_velocity[a]) * radius[a]
+                    + abs(angular_velocity[b]) * radius[b]
+                )
+                + margin_extra
+            )
         sep_a, edge_a = max_separation(vertices, normals, a, ca, b, cb)
         if sep_a > margin:
             continue
@@ -253,13 +299,51 @@ def collide_pairs(pair_a, pair_b, n_pairs, vertices, normals, vertex_count, radi
         if two_points:
             slot = 0
             if keep1:
-                _emit(rows, a, b, feature, 0, p1x, p1y, outx, outy, -s1, pair_depth,
-                      c_a, c_b, c_feature, c_slot, c_point, c_normal, c_depth, c_pair_depth)
+                _emit(
+                    rows,
+                    a,
+                    b,
+                    feature,
+                    0,
+                    p1x,
+                    p1y,
+                    outx,
+                    outy,
+                    -s1,
+                    pair_depth,
+                    c_a,
+                    c_b,
+                    c_feature,
+                    c_slot,
+                    c_point,
+                    c_normal,
+                    c_depth,
+                    c_pair_depth,
+                )
                 rows += 1
                 slot = 1
             if keep2:
-                _emit(rows, a, b, feature, slot, p2x, p2y, outx, outy, -s2, pair_depth,
-                      c_a, c_b, c_feature, c_slot, c_point, c_normal, c_depth, c_pair_depth)
+                _emit(
+                    rows,
+                    a,
+                    b,
+                    feature,
+                    slot,
+                    p2x,
+                    p2y,
+                    outx,
+                    outy,
+                    -s2,
+                    pair_depth,
+                    c_a,
+                    c_b,
+                    c_feature,
+                    c_slot,
+                    c_point,
+                    c_normal,
+                    c_depth,
+                    c_pair_depth,
+                )
                 rows += 1
         else:
             if keep1 and keep2:
@@ -280,15 +364,35 @@ def collide_pairs(pair_a, pair_b, n_pairs, vertices, normals, vertex_count, radi
             else:
                 px = p2x
                 py = p2y
-            _emit(rows, a, b, feature, 0, px, py, outx, outy, pair_depth, pair_depth,
-                  c_a, c_b, c_feature, c_slot, c_point, c_normal, c_depth, c_pair_depth)
+            _emit(
+                rows,
+                a,
+                b,
+                feature,
+                0,
+                px,
+                py,
+                outx,
+                outy,
+                pair_depth,
+                pair_depth,
+                c_a,
+                c_b,
+                c_feature,
+                c_slot,
+                c_point,
+                c_normal,
+                c_depth,
+                c_pair_depth,
+            )
             rows += 1
     return rows
 
 
 @numba.njit(cache=True, nogil=True)
-def match_previous(rows, c_a, c_b, c_feature, c_slot, n, prev_key, prev_feature, prev_slot,
-                   c_previous):
+def match_previous(
+    rows, c_a, c_b, c_feature, c_slot, n, prev_key, prev_feature, prev_slot, c_previous
+):
     """For each row, the previous step's row with the same pair, feature and slot (the same
     contact point, whose impulse warm-starts this one), or -1.
 

@@ -24,8 +24,25 @@ SLOP_SHARE = 0.05
 
 
 @numba.njit(cache=True, nogil=True)
-def push_out(rows, c_a, c_b, c_feature, c_slot, c_point, c_normal, c_pair_depth, inv_mass,
-             thickness, position, mode, slop, correction, iterations, c_push_a, c_push_b):
+def push_out(
+    rows,
+    c_a,
+    c_b,
+    c_feature,
+    c_slot,
+    c_point,
+    c_normal,
+    c_pair_depth,
+    inv_mass,
+    thickness,
+    position,
+    mode,
+    slop,
+    correction,
+    iterations,
+    c_push_a,
+    c_push_b,
+):
     """Push each pair apart (on its slot-0 row) in `iterations` passes; positions in place.
 
     The depth a pair still has after earlier pushes in this stage is its MTD depth minus how far
@@ -36,7 +53,6 @@ def push_out(rows, c_a, c_b, c_feature, c_slot, c_point, c_normal, c_pair_depth,
     and moves every row's point with its incident body (feature // 4096 == 0: the reference face
     is a's, the point is on b).
     """
-    n = position.shape[0]
     start = position.copy()
     for k in range(rows):
         c_push_a[k, 0] = 0.0
@@ -54,8 +70,9 @@ def push_out(rows, c_a, c_b, c_feature, c_slot, c_point, c_normal, c_pair_depth,
                 continue
             nx = c_normal[k, 0]
             ny = c_normal[k, 1]
-            moved = ((position[b, 0] - start[b, 0] - position[a, 0] + start[a, 0]) * nx
-                     + (position[b, 1] - start[b, 1] - position[a, 1] + start[a, 1]) * ny)
+            moved = (position[b, 0] - start[b, 0] - position[a, 0] + start[a, 0]) * nx + (
+                position[b, 1] - start[b, 1] - position[a, 1] + start[a, 1]
+            ) * ny
             d = c_pair_depth[k] - moved
             if mode == PARTIAL:
                 # the slop never exceeds a small share of the thinner body (a 1 mm body or a

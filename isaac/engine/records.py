@@ -6,8 +6,9 @@ Conventions used by every field below (and by the log format, docs/log-format.md
 - A contact row is one contact *point* between bodies ``a < b``. ``normal`` is a unit vector that
   points from body a towards body b. ``depth`` is the penetration (m, >= 0; negative only for a
   speculative contact, where it is minus the gap). The impulse ``j`` (N·s, >= 0) was applied as
-  ``-j * normal`` to a and ``+j * normal`` to b at ``point``; ``tangent_impulse`` (N·s, signed, along
-  ``tangent = (-normal_y, normal_x)``) likewise ``-jt * tangent`` to a and ``+jt * tangent`` to b.
+  ``-j * normal`` to a and ``+j * normal`` to b at ``point``; ``tangent_impulse`` (N·s, signed,
+  along ``tangent = (-normal_y, normal_x)``) likewise ``-jt * tangent`` to a and ``+jt * tangent``
+to b.
 - ``push_a`` / ``push_b`` are the displacements (m, world) the MTD push-out applied to a and b for
   this row's pair; a pair's push is stored on its first point (``slot == 0``) only, so summing the
   rows gives what was applied.
@@ -22,8 +23,19 @@ from dataclasses import dataclass
 import numpy as np
 
 CONTACT_FIELDS = (
-    "substep", "a", "b", "feature", "slot", "point", "normal", "depth", "push_a", "push_b",
-    "impulse", "tangent_impulse", "restitution",
+    "substep",
+    "a",
+    "b",
+    "feature",
+    "slot",
+    "point",
+    "normal",
+    "depth",
+    "push_a",
+    "push_b",
+    "impulse",
+    "tangent_impulse",
+    "restitution",
 )
 
 
@@ -64,7 +76,7 @@ class Contacts:
         return int(self.a.shape[0])
 
     @staticmethod
-    def empty() -> "Contacts":
+    def empty() -> Contacts:
         i = np.zeros(0, dtype=np.int32)
         f = np.zeros(0, dtype=np.float64)
         v = np.zeros((0, 2), dtype=np.float64)

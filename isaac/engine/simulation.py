@@ -7,13 +7,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from isaac.errors import SimulationError
+from isaac.engine.integrate import DIVERGED_ANGLE, DIVERGED_POSITION, DIVERGED_SPEED, diverged_body
 from isaac.engine.records import Contacts, StepRecord
-from isaac.scene import Scene
-from isaac.engine.integrate import (DIVERGED_ANGLE, DIVERGED_POSITION, DIVERGED_SPEED,
-                                    diverged_body)
 from isaac.engine.step import ContactCache, StepSettings, Workspace, detect, step
 from isaac.engine.world import Model, State, build_model, initial_state
+from isaac.errors import SimulationError
+from isaac.scene import Scene
 
 __all__ = ["DIVERGED_ANGLE", "DIVERGED_POSITION", "DIVERGED_SPEED", "BodyView", "Simulation"]
 _FIELDS = ("position", "velocity", "angle", "angular velocity")
@@ -28,8 +27,9 @@ class Simulation:
     what the next step needs, so resuming gives the same bits as running through.
     """
 
-    def __init__(self, scene: Scene, *, start: StepRecord | None = None,
-                 compile_ahead: bool = True) -> None:
+    def __init__(
+        self, scene: Scene, *, start: StepRecord | None = None, compile_ahead: bool = True
+    ) -> None:
         """compile_ahead: on a machine whose numba cache lacks the solver, compile the step's
         kernels in two processes at once before the first step (`isaac.engine.compile_ahead`)."""
         self.scene = scene
@@ -76,10 +76,16 @@ class Simulation:
     def record(self) -> StepRecord:
         """An immutable copy of the current state and the contacts of the step that made it."""
         s = self.state
-        return StepRecord(step=s.step, time=s.step * self.scene.world.dt,
-                          position=s.position.copy(), angle=s.angle.copy(),
-                          velocity=s.velocity.copy(), angular_velocity=s.angular_velocity.copy(),
-                          exists=s.exists.copy(), contacts=self._contacts)
+        return StepRecord(
+            step=s.step,
+            time=s.step * self.scene.world.dt,
+            position=s.position.copy(),
+            angle=s.angle.copy(),
+            velocity=s.velocity.copy(),
+            angular_velocity=s.angular_velocity.copy(),
+            exists=s.exists.copy(),
+            contacts=self._contacts,
+        )
 
     def step(self) -> StepRecord:
         """Advance one step (dt seconds) and return the new state's record.
@@ -87,8 +93,9 @@ class Simulation:
         Raises SimulationError (naming the step and body) if the state becomes NaN, infinite or
         absurdly large; the state before the failing step is what `record()` returned last.
         """
-        contacts, cache = step(self.model, self.settings, self.scene.world.dt, self.state,
-                               self._work, self._cache)
+        contacts, cache = step(
+            self.model, self.settings, self.scene.world.dt, self.state, self._work, self._cache
+        )
         body, field = self._diverged()
         if body >= 0:
             failed = self.state.step
@@ -97,7 +104,9 @@ class Simulation:
             raise SimulationError(
                 f"step {failed}: body {name!r} (index {body}) has a non-finite or diverged "
                 f"{_FIELDS[field]}; the simulation stopped (try a smaller dt or more substeps)",
-                step=failed, body=name)
+                step=failed,
+                body=name,
+            )
         self._contacts, self._cache = contacts, cache
         self._last = self.record()
         return self._last
@@ -120,12 +129,17 @@ class Simulation:
         """
         rows = detect(self.model, self.settings, self.state, self._work, self._cache)
         found = self._work.contacts(rows, 0)
-        for resolved in (found.push_a, found.push_b, found.impulse, found.tangent_impulse,
-                         found.restitution):
+        for resolved in (
+            found.push_a,
+            found.push_b,
+            found.impulse,
+            found.tangent_impulse,
+            found.restitution,
+        ):
             resolved[...] = 0.0
         return found
 
-    def body(self, name: str) -> "BodyView":
+    def body(self, name: str) -> BodyView:
         """A read-only view of one body's current state, by name."""
         try:
             return BodyView(self, self.model.names.index(name))
@@ -133,11 +147,14 @@ class Simulation:
             raise KeyError(f"no body named {name!r}") from None
 
     def _restore(self, record: StepRecord) -> None:
-        self.state = State(int(record.step), np.array(record.position, dtype=np.float64),
-                           np.array(record.angle, dtype=np.float64),
-                           np.array(record.velocity, dtype=np.float64),
-                           np.array(record.angular_velocity, dtype=np.float64),
-                           np.array(record.exists, dtype=bool))
+        self.state = State(
+            int(record.step),
+            np.array(record.position, dtype=np.float64),
+            np.array(record.angle, dtype=np.float64),
+            np.array(record.velocity, dtype=np.float64),
+            np.array(record.angular_velocity, dtype=np.float64),
+            np.array(record.exists, dtype=bool),
+        )
 
 
 @dataclass(frozen=True)

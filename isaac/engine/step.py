@@ -25,13 +25,13 @@ import numpy as np
 
 from isaac.engine.broad_phase import find_pairs, speculative_reach
 from isaac.engine.geometry import transform
-from isaac.engine.solver import RULE_CODES, solve_contacts
 from isaac.engine.integrate import add_gravity, advance_positions
 from isaac.engine.narrow_phase import collide_pairs, match_previous
 from isaac.engine.push_out import FULL, NONE, PARTIAL, push_out
 from isaac.engine.records import Contacts
-from isaac.scene import WorldSettings
+from isaac.engine.solver import RULE_CODES, solve_contacts
 from isaac.engine.world import Model, State
+from isaac.scene import WorldSettings
 
 _CORRECTION = {"full": FULL, "partial": PARTIAL, "none": NONE}
 
@@ -63,25 +63,33 @@ class StepSettings:
     hysteresis: bool
 
     @staticmethod
-    def of(world: WorldSettings) -> "StepSettings":
+    def of(world: WorldSettings) -> StepSettings:
         h = world.dt / world.substeps
         g = float(np.hypot(world.gravity[0], world.gravity[1]))
         speculative = world.ccd == "speculative"
         return StepSettings(
-            gx=float(world.gravity[0]), gy=float(world.gravity[1]), h=h,
-            substeps=int(world.substeps), explicit=world.integrator == "explicit",
+            gx=float(world.gravity[0]),
+            gy=float(world.gravity[1]),
+            h=h,
+            substeps=int(world.substeps),
+            explicit=world.integrator == "explicit",
             seed_solver=world.solver == "seed",
             iterations=1 if world.solver == "seed" else int(world.iterations),
             warm_starting=bool(world.warm_starting) and world.solver != "seed",
             two_points=world.contact_points == 2,
-            correction_mode=_CORRECTION[world.position_correction], slop=float(world.slop),
+            correction_mode=_CORRECTION[world.position_correction],
+            slop=float(world.slop),
             correction=float(world.correction),
             position_iterations=int(world.position_iterations),
             restitution_rule=RULE_CODES[world.restitution_rule],
             restitution_threshold=float(world.restitution_threshold),
-            friction_on=bool(world.friction), friction_rule=RULE_CODES[world.friction_rule],
-            gravity_dv=(np.zeros(2) if world.integrator == "explicit"
-                        else np.array([world.gravity[0] * h, world.gravity[1] * h])),
+            friction_on=bool(world.friction),
+            friction_rule=RULE_CODES[world.friction_rule],
+            gravity_dv=(
+                np.zeros(2)
+                if world.integrator == "explicit"
+                else np.array([world.gravity[0] * h, world.gravity[1] * h])
+            ),
             look_ahead=h if speculative else 0.0,
             gravity_reach=g * h * h if speculative else 0.0,
             hysteresis=bool(world.axis_hysteresis),
@@ -126,13 +134,20 @@ class Workspace:
     def contacts(self, rows: int, substep: int) -> Contacts:
         """Private copies of the first `rows` contact rows."""
         return Contacts(
-            substep=np.full(rows, substep, dtype=np.int32), a=self.a[:rows].copy(),
-            b=self.b[:rows].copy(), feature=self.feature[:rows].copy(),
-            slot=self.slot[:rows].copy(), point=self.point[:rows].copy(),
-            normal=self.normal[:rows].copy(), depth=self.depth[:rows].copy(),
-            push_a=self.push_a[:rows].copy(), push_b=self.push_b[:rows].copy(),
-            impulse=self.impulse[:rows].copy(), tangent_impulse=self.tangent[:rows].copy(),
-            restitution=self.restitution[:rows].copy())
+            substep=np.full(rows, substep, dtype=np.int32),
+            a=self.a[:rows].copy(),
+            b=self.b[:rows].copy(),
+            feature=self.feature[:rows].copy(),
+            slot=self.slot[:rows].copy(),
+            point=self.point[:rows].copy(),
+            normal=self.normal[:rows].copy(),
+            depth=self.depth[:rows].copy(),
+            push_a=self.push_a[:rows].copy(),
+            push_b=self.push_b[:rows].copy(),
+            impulse=self.impulse[:rows].copy(),
+            tangent_impulse=self.tangent[:rows].copy(),
+            restitution=self.restitution[:rows].copy(),
+        )
 
 
 @dataclass(frozen=True, eq=False)
@@ -149,7 +164,7 @@ class ContactCache:
     tangent: np.ndarray
 
     @staticmethod
-    def of(contacts: Contacts, n_bodies: int) -> "ContactCache":
+    def of(contacts: Contacts, n_bodies: int) -> ContactCache:
         c = contacts
         if len(c) and c.substep[-1] != c.substep[0]:
             last = c.substep == c.substep[-1]
@@ -158,74 +173,191 @@ class ContactCache:
         return ContactCache(key, c.feature, c.slot, c.impulse, c.tangent_impulse)
 
 
-def detect(model: Model, cfg: StepSettings, state: State, work: Workspace,
-           cache: ContactCache) -> int:
+def detect(
+    model: Model, cfg: StepSettings, state: State, work: Workspace, cache: ContactCache
+) -> int:
     """Stages 1-3: find the contacts at the current pose; returns the number of rows in `work`."""
     # 1. geometry
-    transform(state.position, state.angle, state.exists, model.vertices_local,
-              model.normals_local, model.vertex_count, work.vertices, work.normals, work.aabb)
+    transform(
+        state.position,
+        state.angle,
+        state.exists,
+        model.vertices_local,
+        model.normals_local,
+        model.vertex_count,
+        work.vertices,
+        work.normals,
+        work.aabb,
+    )
     # 2. broad phase (grow the buffers and look again when they were too small)
-    speculative_reach(state.velocity, state.angular_velocity, model.radius, cfg.look_ahead,
-                      cfg.gravity_reach, work.expand)
+    speculative_reach(
+        state.velocity,
+        state.angular_velocity,
+        model.radius,
+        cfg.look_ahead,
+        cfg.gravity_reach,
+        work.expand,
+    )
     while True:
-        pairs = find_pairs(state.position, model.radius, work.aabb, work.expand, work.movable,
-                           state.exists, work.pair_a, work.pair_b)
+        pairs = find_pairs(
+            state.position,
+            model.radius,
+            work.aabb,
+            work.expand,
+            work.movable,
+            state.exists,
+            work.pair_a,
+            work.pair_b,
+        )
         if pairs <= work.pair_a.shape[0]:
             break
         work.grow(pairs)
     # 3. narrow phase (and which previous contact each row continues, for warm starting)
-    rows = collide_pairs(work.pair_a, work.pair_b, pairs, work.vertices, work.normals,
-                         model.vertex_count, model.radius, state.velocity,
-                         state.angular_velocity, cfg.look_ahead, cfg.gravity_reach,
-                         cfg.two_points, cfg.hysteresis, cache.key, cache.feature,
-                         work.a, work.b, work.feature, work.slot, work.point, work.normal,
-                         work.depth, work.pair_depth)
-    match_previous(rows, work.a, work.b, work.feature, work.slot, model.n_bodies, cache.key,
-                   cache.feature, cache.slot, work.previous)
+    rows = collide_pairs(
+        work.pair_a,
+        work.pair_b,
+        pairs,
+        work.vertices,
+        work.normals,
+        model.vertex_count,
+        model.radius,
+        state.velocity,
+        state.angular_velocity,
+        cfg.look_ahead,
+        cfg.gravity_reach,
+        cfg.two_points,
+        cfg.hysteresis,
+        cache.key,
+        cache.feature,
+        work.a,
+        work.b,
+        work.feature,
+        work.slot,
+        work.point,
+        work.normal,
+        work.depth,
+        work.pair_depth,
+    )
+    match_previous(
+        rows,
+        work.a,
+        work.b,
+        work.feature,
+        work.slot,
+        model.n_bodies,
+        cache.key,
+        cache.feature,
+        cache.slot,
+        work.previous,
+    )
     return rows
 
 
-def resolve(model: Model, cfg: StepSettings, state: State, work: Workspace,
-            cache: ContactCache, rows: int) -> None:
+def resolve(
+    model: Model, cfg: StepSettings, state: State, work: Workspace, cache: ContactCache, rows: int
+) -> None:
     """Stage 5: the impulses of the first `rows` contact rows of `work` (velocities in place)."""
     work.solver_table = solve_contacts(
-        rows, work.a, work.b, work.feature, work.slot, work.point, work.normal, work.depth,
-        work.previous, state.position, state.velocity, state.angular_velocity, model.inv_mass,
-        model.inv_inertia, cfg.gravity_dv, model.restitution, model.friction,
-        cfg.restitution_rule, cfg.friction_rule, cfg.restitution_threshold, cfg.friction_on,
-        cfg.seed_solver, cfg.iterations, cfg.warm_starting, cfg.h, cache.impulse, cache.tangent,
-        work.impulse, work.tangent, work.restitution, work.push_a, work.push_b,
-        work.solver_table)
+        rows,
+        work.a,
+        work.b,
+        work.feature,
+        work.slot,
+        work.point,
+        work.normal,
+        work.depth,
+        work.previous,
+        state.position,
+        state.velocity,
+        state.angular_velocity,
+        model.inv_mass,
+        model.inv_inertia,
+        cfg.gravity_dv,
+        model.restitution,
+        model.friction,
+        cfg.restitution_rule,
+        cfg.friction_rule,
+        cfg.restitution_threshold,
+        cfg.friction_on,
+        cfg.seed_solver,
+        cfg.iterations,
+        cfg.warm_starting,
+        cfg.h,
+        cache.impulse,
+        cache.tangent,
+        work.impulse,
+        work.tangent,
+        work.restitution,
+        work.push_a,
+        work.push_b,
+        work.solver_table,
+    )
 
 
-def substep(model: Model, cfg: StepSettings, state: State, work: Workspace,
-            cache: ContactCache, index: int, solve: bool = True) -> Contacts:
+def substep(
+    model: Model,
+    cfg: StepSettings,
+    state: State,
+    work: Workspace,
+    cache: ContactCache,
+    index: int,
+    solve: bool = True,
+) -> Contacts:
     """Advance the state by one sub-step of cfg.h seconds; return the contacts resolved.
 
-    solve: False skips the impulses (stage 5); only `isaac.engine.compile_ahead` does, to compile the
-    other stages while another process compiles the solver.
+    solve: False skips the impulses (stage 5); only `isaac.engine.compile_ahead` does, to compile
+    the other stages while another process compiles the solver.
     """
     rows = detect(model, cfg, state, work, cache)
     # 4. push-out
-    push_out(rows, work.a, work.b, work.feature, work.slot, work.point, work.normal,
-             work.pair_depth, model.inv_mass, model.thickness, state.position,
-             cfg.correction_mode, cfg.slop,
-             cfg.correction, cfg.position_iterations, work.push_a, work.push_b)
+    push_out(
+        rows,
+        work.a,
+        work.b,
+        work.feature,
+        work.slot,
+        work.point,
+        work.normal,
+        work.pair_depth,
+        model.inv_mass,
+        model.thickness,
+        state.position,
+        cfg.correction_mode,
+        cfg.slop,
+        cfg.correction,
+        cfg.position_iterations,
+        work.push_a,
+        work.push_b,
+    )
     # 5. impulses (semi-implicit Euler: gravity first, so contacts see it)
     if not cfg.explicit:
         add_gravity(state.velocity, work.movable, state.exists, cfg.gx, cfg.gy, cfg.h)
     if solve:
         resolve(model, cfg, state, work, cache, rows)
     # 6. integration (the seed's explicit Euler: gravity last)
-    advance_positions(state.position, state.angle, state.velocity, state.angular_velocity,
-                      work.movable, state.exists, cfg.h)
+    advance_positions(
+        state.position,
+        state.angle,
+        state.velocity,
+        state.angular_velocity,
+        work.movable,
+        state.exists,
+        cfg.h,
+    )
     if cfg.explicit:
         add_gravity(state.velocity, work.movable, state.exists, cfg.gx, cfg.gy, cfg.h)
     return work.contacts(rows, index)
 
 
-def step(model: Model, cfg: StepSettings, dt: float, state: State, work: Workspace,
-         cache: ContactCache, solve: bool = True) -> tuple[Contacts, ContactCache]:
+def step(
+    model: Model,
+    cfg: StepSettings,
+    dt: float,
+    state: State,
+    work: Workspace,
+    cache: ContactCache,
+    solve: bool = True,
+) -> tuple[Contacts, ContactCache]:
     """Advance `state` in place from step k to k + 1; return its contacts and the new cache.
 
     solve: as in `substep` (always True outside `isaac.engine.compile_ahead`)."""

@@ -16,8 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from isaac.scene import polygon
-from isaac.scene import Scene
+from isaac.scene import Scene, polygon
 
 
 @dataclass(frozen=True, eq=False)
@@ -131,8 +130,10 @@ def build_model(scene: Scene) -> Model:
         count[i] = k
         radius[i] = np.sqrt(np.max(local[:, 0] ** 2 + local[:, 1] ** 2))
         # depth of every vertex behind every edge: -n_k . (v_j - v_k), shape (edges, vertices)
-        behind = -(normals[i, :k, None, 0] * (local[None, :, 0] - local[:, None, 0])
-                   + normals[i, :k, None, 1] * (local[None, :, 1] - local[:, None, 1]))
+        behind = -(
+            normals[i, :k, None, 0] * (local[None, :, 0] - local[:, None, 0])
+            + normals[i, :k, None, 1] * (local[None, :, 1] - local[:, None, 1])
+        )
         thickness[i] = behind.max(axis=1).min()
         mass[i] = area * body.density
         inertia[i] = second_moment * body.density
@@ -140,8 +141,9 @@ def build_model(scene: Scene) -> Model:
     inv_mass = np.where(concrete, 0.0, 1.0 / mass)
     inv_inertia = np.where(concrete, 0.0, 1.0 / inertia)
     enters_at = np.array([b.enters_at for b in scene.bodies], dtype=np.float64)
-    leaves_at = np.array([np.inf if b.leaves_at is None else b.leaves_at
-                          for b in scene.bodies], dtype=np.float64)
+    leaves_at = np.array(
+        [np.inf if b.leaves_at is None else b.leaves_at for b in scene.bodies], dtype=np.float64
+    )
     return Model(
         names=tuple(b.name for b in scene.bodies),
         vertices_local=verts,

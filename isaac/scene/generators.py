@@ -46,15 +46,36 @@ def _vertex_tuple(vertices: np.ndarray) -> tuple[tuple[float, float], ...]:
     return tuple((float(x), float(y)) for x, y in vertices)
 
 
-def _concrete_box(name: str, width: float, height: float, centre: tuple[float, float],
-                  restitution: float, friction: float) -> BodySpec:
-    return BodySpec(name=name, vertices=_vertex_tuple(box_vertices(width, height)),
-                    position=centre, restitution=restitution, friction=friction, concrete=True)
+def _concrete_box(
+    name: str,
+    width: float,
+    height: float,
+    centre: tuple[float, float],
+    restitution: float,
+    friction: float,
+) -> BodySpec:
+    return BodySpec(
+        name=name,
+        vertices=_vertex_tuple(box_vertices(width, height)),
+        position=centre,
+        restitution=restitution,
+        friction=friction,
+        concrete=True,
+    )
 
 
-def pyramid(*, rows: int, box: tuple[float, float], base: tuple[float, float] = (0.0, 0.0),
-            spacing: float = 0.0, density: float = 1.0, restitution: float = 0.0,
-            friction: float = 0.5, name: str = "pyramid", ground: bool = True) -> list[BodySpec]:
+def pyramid(
+    *,
+    rows: int,
+    box: tuple[float, float],
+    base: tuple[float, float] = (0.0, 0.0),
+    spacing: float = 0.0,
+    density: float = 1.0,
+    restitution: float = 0.0,
+    friction: float = 0.5,
+    name: str = "pyramid",
+    ground: bool = True,
+) -> list[BodySpec]:
     """A pyramid of boxes resting on each other (and on a concrete ground if `ground`).
 
     rows: boxes in the bottom row (the top row has 1); rows * (rows + 1) / 2 boxes in all.
@@ -71,17 +92,32 @@ def pyramid(*, rows: int, box: tuple[float, float], base: tuple[float, float] = 
     bodies = []
     if ground:
         ground_width = rows * width + (rows - 1) * spacing + 4.0 * width
-        bodies.append(_concrete_box(f"{name}/ground", ground_width, height,
-                                    (base[0], base[1] - 0.5 * height), restitution, friction))
+        bodies.append(
+            _concrete_box(
+                f"{name}/ground",
+                ground_width,
+                height,
+                (base[0], base[1] - 0.5 * height),
+                restitution,
+                friction,
+            )
+        )
     for row in range(1, rows + 1):
         count = rows - row + 1
         y = base[1] + (row - 0.5) * height
         for column in range(1, count + 1):
             # centred on base[0]: offsets -(count-1)/2 .. +(count-1)/2 pitches
             x = base[0] + (column - 1 - 0.5 * (count - 1)) * pitch
-            bodies.append(BodySpec(name=f"{name}/{row}/{column}", vertices=vertices,
-                                   position=(x, y), density=density, restitution=restitution,
-                                   friction=friction))
+            bodies.append(
+                BodySpec(
+                    name=f"{name}/{row}/{column}",
+                    vertices=vertices,
+                    position=(x, y),
+                    density=density,
+                    restitution=restitution,
+                    friction=friction,
+                )
+            )
     return bodies
 
 
@@ -91,18 +127,30 @@ def pile_layout(count: int, radius_max: float, width: float) -> tuple[int, int, 
     cell = CELL_MARGIN * 2.0 * radius_max
     columns = int(width // cell)
     if columns < 1:
-        raise GeneratorError("container.width",
-                             f"{width!r} m is narrower than one body cell ({cell!r} m); "
-                             "widen the container or lower radius")
+        raise GeneratorError(
+            "container.width",
+            f"{width!r} m is narrower than one body cell ({cell!r} m); "
+            "widen the container or lower radius",
+        )
     rows = -(-count // columns)
     return columns, rows, cell
 
 
-def pile(*, count: int, seed: int = 0, sides: tuple[int, int] = (3, 8),
-         radius: tuple[float, float] = (0.2, 0.5), width: float = 10.0,
-         height: float | None = None, thickness: float = 0.5,
-         position: tuple[float, float] = (0.0, 0.0), density: float = 1.0,
-         restitution: float = 0.0, friction: float = 0.5, name: str = "pile") -> list[BodySpec]:
+def pile(
+    *,
+    count: int,
+    seed: int = 0,
+    sides: tuple[int, int] = (3, 8),
+    radius: tuple[float, float] = (0.2, 0.5),
+    width: float = 10.0,
+    height: float | None = None,
+    thickness: float = 0.5,
+    position: tuple[float, float] = (0.0, 0.0),
+    density: float = 1.0,
+    restitution: float = 0.0,
+    friction: float = 0.5,
+    name: str = "pile",
+) -> list[BodySpec]:
     """`count` random convex polygons falling into an open box made of 3 concrete boxes.
 
     sides: (min, max) vertex count, inclusive, each polygon drawn uniformly.
@@ -120,20 +168,38 @@ def pile(*, count: int, seed: int = 0, sides: tuple[int, int] = (3, 8),
     if height is None:
         height = needed
     elif height < needed:
-        raise GeneratorError("container.height",
-                             f"{height!r} m is too low for {count} bodies: they start in {rows} "
-                             f"rows of {columns} cells of {cell!r} m, which need {needed!r} m; "
-                             "raise height, widen the container, or leave height out")
+        raise GeneratorError(
+            "container.height",
+            f"{height!r} m is too low for {count} bodies: they start in {rows} "
+            f"rows of {columns} cells of {cell!r} m, which need {needed!r} m; "
+            "raise height, widen the container, or leave height out",
+        )
     x0, y0 = position
     bodies = [
-        _concrete_box(f"{name}/floor", width + 2.0 * thickness, thickness,
-                      (x0, y0 - 0.5 * thickness), restitution, friction),
-        _concrete_box(f"{name}/left", thickness, height,
-                      (x0 - 0.5 * width - 0.5 * thickness, y0 + 0.5 * height), restitution,
-                      friction),
-        _concrete_box(f"{name}/right", thickness, height,
-                      (x0 + 0.5 * width + 0.5 * thickness, y0 + 0.5 * height), restitution,
-                      friction),
+        _concrete_box(
+            f"{name}/floor",
+            width + 2.0 * thickness,
+            thickness,
+            (x0, y0 - 0.5 * thickness),
+            restitution,
+            friction,
+        ),
+        _concrete_box(
+            f"{name}/left",
+            thickness,
+            height,
+            (x0 - 0.5 * width - 0.5 * thickness, y0 + 0.5 * height),
+            restitution,
+            friction,
+        ),
+        _concrete_box(
+            f"{name}/right",
+            thickness,
+            height,
+            (x0 + 0.5 * width + 0.5 * thickness, y0 + 0.5 * height),
+            restitution,
+            friction,
+        ),
     ]
     rng = np.random.default_rng(seed)
     left = x0 - 0.5 * columns * cell
@@ -156,9 +222,19 @@ def pile(*, count: int, seed: int = 0, sides: tuple[int, int] = (3, 8),
         c, s = math.cos(angle), math.sin(angle)
         cell_x = left + (i % columns + 0.5) * cell
         cell_y = y0 + (i // columns + 0.5) * cell
-        pos = (cell_x + c * centroid[0] - s * centroid[1],
-               cell_y + s * centroid[0] + c * centroid[1])
-        bodies.append(BodySpec(name=f"{name}/{i + 1}", vertices=_vertex_tuple(local),
-                               position=(float(pos[0]), float(pos[1])), angle=angle,
-                               density=density, restitution=restitution, friction=friction))
+        pos = (
+            cell_x + c * centroid[0] - s * centroid[1],
+            cell_y + s * centroid[0] + c * centroid[1],
+        )
+        bodies.append(
+            BodySpec(
+                name=f"{name}/{i + 1}",
+                vertices=_vertex_tuple(local),
+                position=(float(pos[0]), float(pos[1])),
+                angle=angle,
+                density=density,
+                restitution=restitution,
+                friction=friction,
+            )
+        )
     return bodies

@@ -15,14 +15,34 @@ import yaml
 
 from isaac.errors import SceneError
 from isaac.scene import generators, polygon
-from isaac.scene.limits import (MAX_BODIES, MAX_COORDINATE, MAX_DENSITY, MAX_FRICTION,
-                                MAX_GRAVITY, MAX_ITERATIONS, MAX_PYRAMID_ROWS, MAX_SCENE_BYTES,
-                                MAX_SIZE, MAX_SPEED, MAX_STEPS, MAX_SUBSTEPS, MAX_TIME,
-                                MAX_VERTICES, MIN_SIZE)
-from isaac.scene.reader import (compose, describe, join_path, line_of, optional, Reader, scalar_or_none)
+from isaac.scene.limits import (
+    MAX_BODIES,
+    MAX_COORDINATE,
+    MAX_DENSITY,
+    MAX_FRICTION,
+    MAX_GRAVITY,
+    MAX_ITERATIONS,
+    MAX_PYRAMID_ROWS,
+    MAX_SCENE_BYTES,
+    MAX_SIZE,
+    MAX_SPEED,
+    MAX_STEPS,
+    MAX_SUBSTEPS,
+    MAX_TIME,
+    MAX_VERTICES,
+    MIN_SIZE,
+)
+from isaac.scene.reader import (
+    Reader,
+    compose,
+    describe,
+    join_path,
+    line_of,
+    optional,
+    scalar_or_none,
+)
 from isaac.scene.settings import DEFAULT_PRESET, PRESETS, WorldSettings
 from isaac.scene.spec import BodySpec, Scene
-
 
 # --- world ----------------------------------------------------------------------------------
 
@@ -81,8 +101,20 @@ def _read_world(r: Reader, node) -> WorldSettings:
 
 # --- bodies ---------------------------------------------------------------------------------
 
-_BODY_KEYS = ("name", "shape", "position", "angle", "velocity", "angular_velocity", "density",
-              "restitution", "friction", "concrete", "enters_at", "leaves_at")
+_BODY_KEYS = (
+    "name",
+    "shape",
+    "position",
+    "angle",
+    "velocity",
+    "angular_velocity",
+    "density",
+    "restitution",
+    "friction",
+    "concrete",
+    "enters_at",
+    "leaves_at",
+)
 
 
 def _vertices_tuple(v) -> tuple[tuple[float, float], ...]:
@@ -108,16 +140,21 @@ def _read_shape(r: Reader, node, path: str) -> tuple[tuple[float, float], ...]:
         phase = optional(r.number, p, "phase", path, 0.0, -MAX_SPEED, MAX_SPEED)
         return _vertices_tuple(polygon.regular_vertices(sides, radius, phase))
     items = r.sequence(value, path, min_len=3, max_len=MAX_VERTICES, what="vertices")
-    raw = [r.pair(item, f"{path}[{i}]", -MAX_COORDINATE, MAX_COORDINATE)
-           for i, item in enumerate(items)]
+    raw = [
+        r.pair(item, f"{path}[{i}]", -MAX_COORDINATE, MAX_COORDINATE)
+        for i, item in enumerate(items)
+    ]
     try:
         ccw = polygon.validate_polygon(raw)
     except ValueError as exc:
         raise r.fail(str(exc), value, path) from None
     extent = float(math.hypot(*(ccw.max(axis=0) - ccw.min(axis=0))))
     if not MIN_SIZE <= extent <= MAX_SIZE:
-        raise r.fail(f"the polygon's extent {extent!r} m is outside [{MIN_SIZE!r}, {MAX_SIZE!r}]",
-                     value, path)
+        raise r.fail(
+            f"the polygon's extent {extent!r} m is outside [{MIN_SIZE!r}, {MAX_SIZE!r}]",
+            value,
+            path,
+        )
     return _vertices_tuple(ccw)
 
 
@@ -132,17 +169,20 @@ def _read_body(r: Reader, node, path: str, index: int) -> BodySpec:
         leaves_path = join_path(path, "leaves_at")
         leaves_at = r.number(m["leaves_at"][1], leaves_path, 0.0, MAX_TIME)
         if leaves_at <= enters_at:
-            raise r.fail(f"leaves_at ({leaves_at!r} s) must be later than enters_at "
-                         f"({enters_at!r} s)", m["leaves_at"][1], leaves_path)
+            raise r.fail(
+                f"leaves_at ({leaves_at!r} s) must be later than enters_at ({enters_at!r} s)",
+                m["leaves_at"][1],
+                leaves_path,
+            )
     return BodySpec(
         name=name,
         vertices=_read_shape(r, m["shape"][1], join_path(path, "shape")),
-        position=optional(r.pair, m, "position", path, (0.0, 0.0), -MAX_COORDINATE,
-                           MAX_COORDINATE),
+        position=optional(r.pair, m, "position", path, (0.0, 0.0), -MAX_COORDINATE, MAX_COORDINATE),
         angle=optional(r.number, m, "angle", path, 0.0, -MAX_SPEED, MAX_SPEED),
         velocity=optional(r.pair, m, "velocity", path, (0.0, 0.0), -MAX_SPEED, MAX_SPEED),
-        angular_velocity=optional(r.number, m, "angular_velocity", path, 0.0, -MAX_SPEED,
-                                   MAX_SPEED),
+        angular_velocity=optional(
+            r.number, m, "angular_velocity", path, 0.0, -MAX_SPEED, MAX_SPEED
+        ),
         density=optional(r.number, m, "density", path, 1.0, 0.0, MAX_DENSITY, lo_open=True),
         restitution=optional(r.number, m, "restitution", path, 0.0, 0.0, 1.0),
         friction=optional(r.number, m, "friction", path, 0.5, 0.0, MAX_FRICTION),
@@ -154,10 +194,28 @@ def _read_body(r: Reader, node, path: str, index: int) -> BodySpec:
 
 # --- generators -----------------------------------------------------------------------------
 
-_PYRAMID_KEYS = ("rows", "box", "base", "spacing", "density", "restitution", "friction", "name",
-                 "ground")
-_PILE_KEYS = ("count", "seed", "sides", "radius", "container", "density", "restitution",
-              "friction", "name")
+_PYRAMID_KEYS = (
+    "rows",
+    "box",
+    "base",
+    "spacing",
+    "density",
+    "restitution",
+    "friction",
+    "name",
+    "ground",
+)
+_PILE_KEYS = (
+    "count",
+    "seed",
+    "sides",
+    "radius",
+    "container",
+    "density",
+    "restitution",
+    "friction",
+    "name",
+)
 _CONTAINER_KEYS = ("width", "height", "thickness", "position")
 
 
@@ -199,14 +257,17 @@ def _read_pile(r: Reader, node, path: str) -> tuple[dict, int]:
     if "sides" in m:
         sides_path = join_path(path, "sides")
         items = r.sequence(m["sides"][1], sides_path, min_len=2, max_len=2, what="numbers")
-        sides = (r.integer(items[0], f"{sides_path}[0]", 3, MAX_VERTICES),
-                 r.integer(items[1], f"{sides_path}[1]", 3, MAX_VERTICES))
+        sides = (
+            r.integer(items[0], f"{sides_path}[0]", 3, MAX_VERTICES),
+            r.integer(items[1], f"{sides_path}[1]", 3, MAX_VERTICES),
+        )
         if sides[0] > sides[1]:
             raise r.fail("min sides is greater than max sides", m["sides"][1], sides_path)
     radius = optional(r.pair, m, "radius", path, (0.2, 0.5), MIN_SIZE, MAX_SIZE)
     if radius[0] > radius[1]:
-        raise r.fail("min radius is greater than max radius", m["radius"][1],
-                     join_path(path, "radius"))
+        raise r.fail(
+            "min radius is greater than max radius", m["radius"][1], join_path(path, "radius")
+        )
     container = {}
     if "container" in m:
         cpath = join_path(path, "container")
@@ -215,8 +276,9 @@ def _read_pile(r: Reader, node, path: str) -> tuple[dict, int]:
             width=optional(r.number, c, "width", cpath, 10.0, MIN_SIZE, MAX_SIZE),
             height=optional(r.number, c, "height", cpath, None, MIN_SIZE, MAX_COORDINATE),
             thickness=optional(r.number, c, "thickness", cpath, 0.5, MIN_SIZE, MAX_SIZE),
-            position=optional(r.pair, c, "position", cpath, (0.0, 0.0), -MAX_COORDINATE,
-                               MAX_COORDINATE),
+            position=optional(
+                r.pair, c, "position", cpath, (0.0, 0.0), -MAX_COORDINATE, MAX_COORDINATE
+            ),
         )
     options = dict(
         count=count,
@@ -239,8 +301,12 @@ def _expand_generator(r: Reader, node, path: str, room: int) -> list[BodySpec]:
     reader = _read_pyramid if kind == "pyramid" else _read_pile
     options, size = reader(r, options_node, path)
     if size > room:
-        raise r.fail(f"this generator makes {size} bodies; with the others the scene would "
-                     f"exceed {MAX_BODIES} bodies", options_node, path)
+        raise r.fail(
+            f"this generator makes {size} bodies; with the others the scene would "
+            f"exceed {MAX_BODIES} bodies",
+            options_node,
+            path,
+        )
     try:
         return getattr(generators, kind)(**options)
     except generators.GeneratorError as exc:
@@ -281,14 +347,16 @@ def load_scene(path) -> Scene:
     try:
         text = data.decode("utf-8")
     except UnicodeDecodeError as exc:
-        line = data[:exc.start].count(b"\n") + 1
-        raise SceneError(f"not UTF-8 text (byte 0x{data[exc.start]:02x} at offset {exc.start})",
-                         source=source, line=line) from None
+        line = data[: exc.start].count(b"\n") + 1
+        raise SceneError(
+            f"not UTF-8 text (byte 0x{data[exc.start]:02x} at offset {exc.start})",
+            source=source,
+            line=line,
+        ) from None
     return load_scene_text(text, source=source, default_name=p.stem)
 
 
-def load_scene_text(text: str, source: str = "<text>", *, default_name: str | None = None
-                    ) -> Scene:
+def load_scene_text(text: str, source: str = "<text>", *, default_name: str | None = None) -> Scene:
     """Check and expand scene YAML `text`; `source` names it in messages and in `Scene.source`.
 
     The name defaults to `default_name`, else "scene". Raises SceneError like `load_scene`.
@@ -302,8 +370,11 @@ def load_scene_text(text: str, source: str = "<text>", *, default_name: str | No
     try:
         root = compose(text, source)
         if root is None:
-            raise SceneError("the scene is empty (expected a mapping with `bodies:` or "
-                             "`generators:`)", source=source, line=1)
+            raise SceneError(
+                "the scene is empty (expected a mapping with `bodies:` or `generators:`)",
+                source=source,
+                line=1,
+            )
         return _read_scene(Reader(source), root, default_name or "scene")
     except RecursionError:
         raise SceneError("the document is nested too deeply", source=source) from None
@@ -323,8 +394,12 @@ def _read_scene(r: Reader, root, default_name: str) -> Scene:
     def add(spec: BodySpec, path: str, node) -> None:
         if spec.name in origin:
             first_path, first_line = origin[spec.name]
-            raise r.fail(f"duplicate body name {spec.name!r} (already used by {first_path} at "
-                         f"line {first_line})", node, path)
+            raise r.fail(
+                f"duplicate body name {spec.name!r} (already used by {first_path} at "
+                f"line {first_line})",
+                node,
+                path,
+            )
         origin[spec.name] = (path, line_of(node))
         bodies.append(spec)
 
@@ -350,8 +425,10 @@ def _read_scene(r: Reader, root, default_name: str) -> Scene:
     analytic = None
     if "analytic" in m and scalar_or_none(m["analytic"][1]) is not None:
         if not isinstance(m["analytic"][1], yaml.MappingNode):
-            raise r.fail(f"expected a mapping, got {describe(m['analytic'][1])}",
-                         m["analytic"][1], "analytic")
+            raise r.fail(
+                f"expected a mapping, got {describe(m['analytic'][1])}",
+                m["analytic"][1],
+                "analytic",
+            )
         analytic = r.plain(m["analytic"][1], "analytic")
-    return Scene(name=name, world=world, bodies=tuple(bodies), source=r.source,
-                 analytic=analytic)
+    return Scene(name=name, world=world, bodies=tuple(bodies), source=r.source, analytic=analytic)

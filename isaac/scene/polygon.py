@@ -62,15 +62,21 @@ def _segments_cross(p: np.ndarray, q: np.ndarray, r: np.ndarray, s: np.ndarray) 
     d1, d2 = orient(r, s, p), orient(r, s, q)
     d3, d4 = orient(p, q, r), orient(p, q, s)
     if ((d1 > 0) != (d2 > 0) and d1 != 0 and d2 != 0) and (
-            (d3 > 0) != (d4 > 0) and d3 != 0 and d4 != 0):
+        (d3 > 0) != (d4 > 0) and d3 != 0 and d4 != 0
+    ):
         return True
 
     def on_segment(a, b, c):  # c collinear with ab: is it within ab's box?
-        return (min(a[0], b[0]) <= c[0] <= max(a[0], b[0])
-                and min(a[1], b[1]) <= c[1] <= max(a[1], b[1]))
+        return min(a[0], b[0]) <= c[0] <= max(a[0], b[0]) and min(a[1], b[1]) <= c[1] <= max(
+            a[1], b[1]
+        )
 
-    return ((d1 == 0 and on_segment(r, s, p)) or (d2 == 0 and on_segment(r, s, q))
-            or (d3 == 0 and on_segment(p, q, r)) or (d4 == 0 and on_segment(p, q, s)))
+    return (
+        (d1 == 0 and on_segment(r, s, p))
+        or (d2 == 0 and on_segment(r, s, q))
+        or (d3 == 0 and on_segment(p, q, r))
+        or (d4 == 0 and on_segment(p, q, s))
+    )
 
 
 def _self_intersects(v: np.ndarray) -> bool:
@@ -174,8 +180,9 @@ def mass_properties(vertices) -> tuple[float, np.ndarray, float]:
         area += tri_area
         cx += tri_area * (e1x + e2x) / 3.0
         cy += tri_area * (e1y + e2y) / 3.0
-        moment += (d / 12.0) * (e1x * e1x + e1x * e2x + e2x * e2x
-                                + e1y * e1y + e1y * e2y + e2y * e2y)
+        moment += (d / 12.0) * (
+            e1x * e1x + e1x * e2x + e2x * e2x + e1y * e1y + e1y * e2y + e2y * e2y
+        )
     cx /= area
     cy /= area
     second_moment = moment - area * (cx * cx + cy * cy)

@@ -40,8 +40,7 @@ class _RefuseAliases(yaml.composer.Composer):
         if getattr(event, "anchor", None) is not None:
             raise Refused("YAML anchors (&name) are not allowed in a scene", event.start_mark)
         if getattr(event, "tag", None) not in (None, "!"):
-            raise Refused(f"YAML tags ({event.tag}) are not allowed in a scene",
-                           event.start_mark)
+            raise Refused(f"YAML tags ({event.tag}) are not allowed in a scene", event.start_mark)
         return super().compose_node(parent, index)
 
     def resolve(self, kind, value, implicit):
@@ -59,8 +58,10 @@ class _NoAliasLoader(_RefuseAliases, yaml.SafeLoader):
 
 
 if getattr(yaml, "__with_libyaml__", False):
-    class _FastNoAliasLoader(_RefuseAliases, yaml._yaml.CParser, yaml.constructor.SafeConstructor,
-                             yaml.resolver.Resolver):
+
+    class _FastNoAliasLoader(
+        _RefuseAliases, yaml._yaml.CParser, yaml.constructor.SafeConstructor, yaml.resolver.Resolver
+    ):
         """libyaml's scanner and parser (about 4x faster on a large expanded scene), our
         composer: same nodes, same marks, same refusals."""
 
@@ -120,8 +121,14 @@ def scalar(node):
             return math.copysign(math.inf, -1.0 if text.startswith("-") else 1.0)
         return int(text)
     if _FLOAT_RE.match(text) or _NONFINITE_RE.match(text):
-        return float(text.replace(".nan", "nan").replace(".NaN", "nan").replace(".NAN", "nan")
-                     .replace(".inf", "inf").replace(".Inf", "inf").replace(".INF", "inf"))
+        return float(
+            text.replace(".nan", "nan")
+            .replace(".NaN", "nan")
+            .replace(".NAN", "nan")
+            .replace(".inf", "inf")
+            .replace(".Inf", "inf")
+            .replace(".INF", "inf")
+        )
     return text
 
 
@@ -132,33 +139,42 @@ class Reader:
         self.source = source
 
     def fail(self, what: str, node=None, path: str = "") -> SceneError:
-        return SceneError(what, source=self.source, line=None if node is None else line_of(node),
-                          path=path)
+        return SceneError(
+            what, source=self.source, line=None if node is None else line_of(node), path=path
+        )
 
     # containers
     def mapping(self, node, path: str, allowed) -> dict:
         """{key: (key node, value node)} in document order; refuses duplicates and unknown keys."""
         if not isinstance(node, yaml.MappingNode):
-            raise self.fail(f"expected a mapping (key: value ...), got {describe(node)}", node,
-                            path)
+            raise self.fail(
+                f"expected a mapping (key: value ...), got {describe(node)}", node, path
+            )
         out: dict = {}
         for key_node, value_node in node.value:
             if not isinstance(key_node, yaml.ScalarNode):
                 raise self.fail("keys must be plain names", key_node, path)
             key = key_node.value
             if key in out:
-                raise self.fail(f"duplicate key {key!r} (first given at line "
-                                f"{line_of(out[key][0])})", key_node, join_path(path, key))
+                raise self.fail(
+                    f"duplicate key {key!r} (first given at line {line_of(out[key][0])})",
+                    key_node,
+                    join_path(path, key),
+                )
             if allowed is not None and key not in allowed:
                 close = difflib.get_close_matches(key, list(allowed), n=1, cutoff=0.6)
-                hint = (f" (did you mean {close[0]!r}?)" if close
-                        else f" (valid keys: {', '.join(allowed)})")
+                hint = (
+                    f" (did you mean {close[0]!r}?)"
+                    if close
+                    else f" (valid keys: {', '.join(allowed)})"
+                )
                 raise self.fail(f"unknown key {key!r}{hint}", key_node, join_path(path, key))
             out[key] = (key_node, value_node)
         return out
 
-    def sequence(self, node, path: str, *, min_len: int = 0, max_len: int | None = None,
-                 what: str = "items") -> list:
+    def sequence(
+        self, node, path: str, *, min_len: int = 0, max_len: int | None = None, what: str = "items"
+    ) -> list:
         if not isinstance(node, yaml.SequenceNode):
             raise self.fail(f"expected a list, got {describe(node)}", node, path)
         n = len(node.value)
@@ -180,8 +196,9 @@ class Reader:
         value = float(value) if math.isfinite(value) else value
         if not (value > lo if lo_open else value >= lo) or not value <= hi:
             low = f"> {lo!r}" if lo_open else f">= {lo!r}"
-            raise self.fail(f"{node.value} is out of range (must be {low} and <= {hi!r})",
-                            node, path)
+            raise self.fail(
+                f"{node.value} is out of range (must be {low} and <= {hi!r})", node, path
+            )
         return value
 
     def integer(self, node, path: str, lo: int, hi: int) -> int:
@@ -213,8 +230,11 @@ class Reader:
         else:
             value = self.string(node, path)
         if not value or len(value) > MAX_NAME_LENGTH or not value.isprintable():
-            raise self.fail(f"a name must be 1 to {MAX_NAME_LENGTH} printable characters, got "
-                            f"{value[:40]!r}", node, path)
+            raise self.fail(
+                f"a name must be 1 to {MAX_NAME_LENGTH} printable characters, got {value[:40]!r}",
+                node,
+                path,
+            )
         return value
 
     def choice(self, node, path: str, options) -> str:
@@ -226,11 +246,14 @@ class Reader:
             raise self.fail(f"{shown!r} is not one of {', '.join(options)}{hint}", node, path)
         return value
 
-    def pair(self, node, path: str, lo: float, hi: float, *, lo_open: bool = False
-             ) -> tuple[float, float]:
+    def pair(
+        self, node, path: str, lo: float, hi: float, *, lo_open: bool = False
+    ) -> tuple[float, float]:
         items = self.sequence(node, path, min_len=2, max_len=2, what="numbers")
-        return (self.number(items[0], f"{path}[0]", lo, hi, lo_open=lo_open),
-                self.number(items[1], f"{path}[1]", lo, hi, lo_open=lo_open))
+        return (
+            self.number(items[0], f"{path}[0]", lo, hi, lo_open=lo_open),
+            self.number(items[1], f"{path}[1]", lo, hi, lo_open=lo_open),
+        )
 
     def plain(self, node, path: str, depth: int = 0):
         """Free-form data (the `analytic` block): mappings, lists, finite numbers, booleans and
@@ -238,8 +261,10 @@ class Reader:
         if depth > 16:
             raise self.fail("nested too deeply", node, path)
         if isinstance(node, yaml.MappingNode):
-            return {key: self.plain(v, join_path(path, key), depth + 1)
-                    for key, (_, v) in self.mapping(node, path, None).items()}
+            return {
+                key: self.plain(v, join_path(path, key), depth + 1)
+                for key, (_, v) in self.mapping(node, path, None).items()
+            }
         if isinstance(node, yaml.SequenceNode):
             return [self.plain(v, f"{path}[{i}]", depth + 1) for i, v in enumerate(node.value)]
         value = scalar(node)
@@ -271,13 +296,15 @@ def compose(text: str, source: str):
         if "nesting depth" in what:
             # PyYAML >= 6.0.3 bounds the depth itself; older ones end in RecursionError below:
             # the same message either way
-            raise SceneError("the document is nested too deeply", source=source,
-                             line=line) from None
+            raise SceneError(
+                "the document is nested too deeply", source=source, line=line
+            ) from None
         raise SceneError(f"YAML syntax error: {what}", source=source, line=line) from None
     except yaml.reader.ReaderError as exc:
-        line = text[:exc.position].count("\n") + 1
-        raise SceneError(f"character #x{exc.character:04x} is not allowed in YAML",
-                         source=source, line=line) from None
+        line = text[: exc.position].count("\n") + 1
+        raise SceneError(
+            f"character #x{exc.character:04x} is not allowed in YAML", source=source, line=line
+        ) from None
     except yaml.YAMLError as exc:
         raise SceneError(f"YAML error: {' '.join(str(exc).split())}", source=source) from None
     except RecursionError:

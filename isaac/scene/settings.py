@@ -7,22 +7,58 @@ from dataclasses import dataclass
 # Fidelity presets: each sets the settings below; explicit keys in `world:` override a preset.
 # `seed` reproduces the seed's algorithm exactly (docs/physics.md).
 PRESETS: dict[str, dict[str, object]] = {
-    "seed": dict(integrator="explicit", substeps=1, solver="seed", iterations=1,
-                 warm_starting=False, contact_points=1, position_correction="full",
-                 position_iterations=1, restitution_threshold=0.0, ccd="off",
-                 axis_hysteresis=False),
-    "fast": dict(integrator="semi_implicit", substeps=1, solver="sequential", iterations=6,
-                 warm_starting=True, contact_points=2, position_correction="partial",
-                 position_iterations=1, restitution_threshold=0.5, ccd="off",
-                 axis_hysteresis=True),
-    "balanced": dict(integrator="semi_implicit", substeps=1, solver="sequential", iterations=10,
-                     warm_starting=True, contact_points=2, position_correction="partial",
-                     position_iterations=3, restitution_threshold=1.0, ccd="speculative",
-                     axis_hysteresis=True),
-    "accurate": dict(integrator="semi_implicit", substeps=4, solver="sequential", iterations=20,
-                     warm_starting=True, contact_points=2, position_correction="partial",
-                     position_iterations=4, restitution_threshold=1.0, ccd="speculative",
-                     axis_hysteresis=True),
+    "seed": dict(
+        integrator="explicit",
+        substeps=1,
+        solver="seed",
+        iterations=1,
+        warm_starting=False,
+        contact_points=1,
+        position_correction="full",
+        position_iterations=1,
+        restitution_threshold=0.0,
+        ccd="off",
+        axis_hysteresis=False,
+    ),
+    "fast": dict(
+        integrator="semi_implicit",
+        substeps=1,
+        solver="sequential",
+        iterations=6,
+        warm_starting=True,
+        contact_points=2,
+        position_correction="partial",
+        position_iterations=1,
+        restitution_threshold=0.5,
+        ccd="off",
+        axis_hysteresis=True,
+    ),
+    "balanced": dict(
+        integrator="semi_implicit",
+        substeps=1,
+        solver="sequential",
+        iterations=10,
+        warm_starting=True,
+        contact_points=2,
+        position_correction="partial",
+        position_iterations=3,
+        restitution_threshold=1.0,
+        ccd="speculative",
+        axis_hysteresis=True,
+    ),
+    "accurate": dict(
+        integrator="semi_implicit",
+        substeps=4,
+        solver="sequential",
+        iterations=20,
+        warm_starting=True,
+        contact_points=2,
+        position_correction="partial",
+        position_iterations=4,
+        restitution_threshold=1.0,
+        ccd="speculative",
+        axis_hysteresis=True,
+    ),
 }
 DEFAULT_PRESET = "balanced"
 
@@ -80,4 +116,3 @@ class WorldSettings:
     friction_rule: str = "sqrt"
     ccd: str = "speculative"
     axis_hysteresis: bool = True
-

@@ -6,6 +6,7 @@ from dataclasses import dataclass
 
 from isaac.scene.settings import WorldSettings
 
+
 @dataclass(frozen=True)
 class BodySpec:
     """One body as the scene gives it (generators already expanded).

@@ -30,8 +30,14 @@ def _yaml_value(value) -> str:
     if isinstance(value, (tuple, list)):
         return "[" + ", ".join(_yaml_value(v) for v in value) + "]"
     if isinstance(value, dict):
-        return "{" + ", ".join(f"{json.dumps(str(k), ensure_ascii=False)}: {_yaml_value(v)}"
-                               for k, v in value.items()) + "}"
+        return (
+            "{"
+            + ", ".join(
+                f"{json.dumps(str(k), ensure_ascii=False)}: {_yaml_value(v)}"
+                for k, v in value.items()
+            )
+            + "}"
+        )
     raise TypeError(f"cannot write {type(value).__name__} as scene YAML")
 
 

@@ -9,9 +9,9 @@ import numpy as np
 from physics_helpers import box
 
 from isaac.engine.diagnostics import kinetic_energy, potential_energy
-from isaac.scene.polygon import validate_polygon
-from isaac.scene import PRESETS, BodySpec, Scene
 from isaac.engine.simulation import Simulation
+from isaac.scene import PRESETS, BodySpec, Scene
+from isaac.scene.polygon import validate_polygon
 
 PRESET_NAMES = ("seed", "fast", "balanced", "accurate")
 G = 9.81  # m/s^2
@@ -25,10 +25,13 @@ def ground(width: float = 20.0, height: float = 1.0, top: float = 0.0, **fields)
 def container(width: float, height: float, thickness: float = 0.5) -> list[BodySpec]:
     """A concrete floor (top at y = 0) and two walls; the inside spans x in [-width/2, width/2]."""
     half = width / 2 + thickness / 2
-    return [box("floor", width + 2 * thickness, thickness, position=(0.0, -thickness / 2),
-                concrete=True),
-            box("left", thickness, height, position=(-half, height / 2), concrete=True),
-            box("right", thickness, height, position=(half, height / 2), concrete=True)]
+    return [
+        box(
+            "floor", width + 2 * thickness, thickness, position=(0.0, -thickness / 2), concrete=True
+        ),
+        box("left", thickness, height, position=(-half, height / 2), concrete=True),
+        box("right", thickness, height, position=(half, height / 2), concrete=True),
+    ]
 
 
 def polygon(name: str, vertices, **fields) -> BodySpec:
@@ -38,20 +41,30 @@ def polygon(name: str, vertices, **fields) -> BodySpec:
 
 
 def regular_vertices(sides: int, radius: float, phase: float = 0.0) -> list[tuple[float, float]]:
-    return [(radius * math.cos(phase + 2 * math.pi * k / sides),
-             radius * math.sin(phase + 2 * math.pi * k / sides)) for k in range(sides)]
+    return [
+        (
+            radius * math.cos(phase + 2 * math.pi * k / sides),
+            radius * math.sin(phase + 2 * math.pi * k / sides),
+        )
+        for k in range(sides)
+    ]
 
 
 def with_preset(scene: Scene, preset: str, **overrides) -> Scene:
     """The scene under another preset (the preset's settings replace the scene's)."""
-    return replace(scene, world=replace(scene.world, fidelity=preset, **PRESETS[preset],
-                                        **overrides))
+    return replace(
+        scene, world=replace(scene.world, fidelity=preset, **PRESETS[preset], **overrides)
+    )
 
 
 def shifted(scene: Scene, dx: float, dy: float) -> Scene:
     """The scene with every body moved by (dx, dy) metres."""
-    return replace(scene, bodies=tuple(
-        replace(b, position=(b.position[0] + dx, b.position[1] + dy)) for b in scene.bodies))
+    return replace(
+        scene,
+        bodies=tuple(
+            replace(b, position=(b.position[0] + dx, b.position[1] + dy)) for b in scene.bodies
+        ),
+    )
 
 
 def energy(sim: Simulation, record) -> float:
@@ -74,8 +87,9 @@ class Trace:
         return max(self.depth, default=0.0)
 
 
-def run(sim: Simulation, steps: int, *, keep_states: bool = False,
-        keep_energy: bool = False) -> Trace:
+def run(
+    sim: Simulation, steps: int, *, keep_states: bool = False, keep_energy: bool = False
+) -> Trace:
     """Step `sim` `steps` times, tracking depth (and optionally states and energy)."""
     trace = Trace()
     for _ in range(steps):
@@ -91,6 +105,10 @@ def run(sim: Simulation, steps: int, *, keep_states: bool = False,
 
 def assert_finite(sim: Simulation) -> None:
     s = sim.state
-    for name, arr in (("position", s.position), ("angle", s.angle), ("velocity", s.velocity),
-                      ("angular velocity", s.angular_velocity)):
+    for name, arr in (
+        ("position", s.position),
+        ("angle", s.angle),
+        ("velocity", s.velocity),
+        ("angular velocity", s.angular_velocity),
+    ):
         assert np.all(np.isfinite(arr)), f"non-finite {name} after step {s.step}"

@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from isaac.scene import load_scene
 from isaac.engine.simulation import Simulation
+from isaac.scene import load_scene
 
 from .helpers import run, with_preset
 
@@ -33,7 +33,8 @@ def _column(preset: str, steps: int) -> None:
     assert first is None, (
         f"{preset}: the column failed at step {first} (t = {first * DT:.2f} s); over the run "
         f"max sideways {dx.max():.4g} m, max vertical {dy.max():.4g} m, max tilt "
-        f"{tilt.max():.4g} rad; top box ends at {pos[-1, -1].round(3).tolist()}")
+        f"{tilt.max():.4g} rad; top box ends at {pos[-1, -1].round(3).tolist()}"
+    )
 
 
 def test_thirty_box_column_stands_for_10_s_under_balanced():

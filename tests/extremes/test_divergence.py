@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 from physics_helpers import box, scene
 
-from isaac.errors import SimulationError
 from isaac.engine.simulation import DIVERGED_POSITION, Simulation
+from isaac.errors import SimulationError
 
 from .helpers import G
 
@@ -17,8 +17,9 @@ ABSURD_DT = 1e5  # s: one step falls about g dt^2 = 1e11 m (WorldSettings built 
 
 
 def _absurd() -> Simulation:
-    return Simulation(scene(box("anvil", 1.0, 1.0), preset="balanced", gravity=(0.0, -G),
-                            dt=ABSURD_DT))
+    return Simulation(
+        scene(box("anvil", 1.0, 1.0), preset="balanced", gravity=(0.0, -G), dt=ABSURD_DT)
+    )
 
 
 def _diverging_step() -> int:
@@ -47,8 +48,15 @@ def test_absurd_dt_stops_with_an_error_naming_step_and_body():
 
 
 def test_nan_in_the_state_stops_the_run_at_once():
-    sim = Simulation(scene(box("anvil", 1.0, 1.0), box("feather", 1.0, 1.0, position=(3.0, 0.0)),
-                           preset="balanced", gravity=(0.0, 0.0), dt=0.01))
+    sim = Simulation(
+        scene(
+            box("anvil", 1.0, 1.0),
+            box("feather", 1.0, 1.0, position=(3.0, 0.0)),
+            preset="balanced",
+            gravity=(0.0, 0.0),
+            dt=0.01,
+        )
+    )
     sim.step()
     sim.state.velocity[1, 0] = np.nan  # forced: what an engine bug would produce
     with pytest.raises(SimulationError) as info:

@@ -7,8 +7,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from isaac.scene import load_scene, load_scene_text
 from isaac.engine.simulation import Simulation
+from isaac.scene import load_scene, load_scene_text
 
 from .helpers import run, shifted
 
@@ -34,9 +34,11 @@ def test_shifted_scene_moves_the_same_for_10_s(name, shift):
 
 
 def _pile(count: int, width: float) -> str:
-    return (f"world: {{dt: 0.016666666666666666, friction: true}}\n"
-            f"generators: [{{pile: {{count: {count}, seed: 1, container: {{width: {width}}}, "
-            f"friction: 0.6}}}}]\n")
+    return (
+        f"world: {{dt: 0.016666666666666666, friction: true}}\n"
+        f"generators: [{{pile: {{count: {count}, seed: 1, container: {{width: {width}}}, "
+        f"friction: 0.6}}}}]\n"
+    )
 
 
 def _pile_run(text: str, shift, steps: int):

@@ -16,8 +16,14 @@ DT = 0.01  # s
 
 
 def _angle_error(steps: int) -> float:
-    sim = Simulation(scene(box("spinner", 1.0, 0.5, angular_velocity=OMEGA), preset="balanced",
-                           gravity=(0.0, 0.0), dt=DT))
+    sim = Simulation(
+        scene(
+            box("spinner", 1.0, 0.5, angular_velocity=OMEGA),
+            preset="balanced",
+            gravity=(0.0, 0.0),
+            dt=DT,
+        )
+    )
     for _ in range(steps):
         sim.step()
     # exact: OMEGA * steps * DT turns, compared modulo 2 pi

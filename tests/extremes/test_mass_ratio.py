@@ -6,8 +6,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from isaac.scene import load_scene
 from isaac.engine.simulation import Simulation
+from isaac.scene import load_scene
 
 from .helpers import PRESET_NAMES, assert_finite, run, with_preset
 
@@ -33,12 +33,21 @@ def _assert_stays_stacked(sim: Simulation) -> None:
     sink_light = np.abs(pos[:, light, 1] - 0.5)
     sink_heavy = np.abs(pos[:, heavy, 1] - 1.5)
     worst = max(sideways.max(), sink_light.max(), sink_heavy.max())
-    first = int(np.argmax((sideways > STACKED_TOLERANCE) | (sink_light > STACKED_TOLERANCE)
-                          | (sink_heavy > STACKED_TOLERANCE))) + 1
+    first = (
+        int(
+            np.argmax(
+                (sideways > STACKED_TOLERANCE)
+                | (sink_light > STACKED_TOLERANCE)
+                | (sink_heavy > STACKED_TOLERANCE)
+            )
+        )
+        + 1
+    )
     assert worst < STACKED_TOLERANCE, (
         f"the stack came apart at step {first} (t = {first * DT:.3f} s): largest sideways offset "
         f"{sideways.max():.4g} m, light box moved {sink_light.max():.4g} m, heavy box "
-        f"{sink_heavy.max():.4g} m (limit {STACKED_TOLERANCE} m)")
+        f"{sink_heavy.max():.4g} m (limit {STACKED_TOLERANCE} m)"
+    )
     assert trace.max_depth < MAX_OVERLAP, f"overlap {trace.max_depth:.4g} m"
 
 

@@ -18,43 +18,57 @@ STEPS = 600  # 10 s
 def fifty_gons():
     """Five 50-vertex discs (r = 0.5 m) dropped in a 4 m box, each a little off the one below."""
     return container(4.0, 8.0) + [
-        polygon(f"disc{i}", regular_vertices(50, 0.5, 0.03 * i),
-                position=(0.3 * (i % 2), 0.6 + 1.1 * i))
-        for i in range(5)]
+        polygon(
+            f"disc{i}", regular_vertices(50, 0.5, 0.03 * i), position=(0.3 * (i % 2), 0.6 + 1.1 * i)
+        )
+        for i in range(5)
+    ]
 
 
 def slivers():
     """Four 10 m x 1 cm planks (aspect 1000:1), slightly tilted, dropped on each other."""
     return container(12.0, 4.0) + [
         box(f"sliver{i}", 10.0, 0.01, position=(0.1 * i, 0.5 + 0.5 * i), angle=0.02 * i)
-        for i in range(4)]
+        for i in range(4)
+    ]
 
 
 def nearly_collinear():
     """Boxes with an extra vertex 1e-7 m outside the middle of the top and bottom edges."""
-    outline = [(-0.5, -0.5), (0.0, -0.5 - 1e-7), (0.5, -0.5), (0.5, 0.5), (0.0, 0.5 + 1e-7),
-               (-0.5, 0.5)]
+    outline = [
+        (-0.5, -0.5),
+        (0.0, -0.5 - 1e-7),
+        (0.5, -0.5),
+        (0.5, 0.5),
+        (0.0, 0.5 + 1e-7),
+        (-0.5, 0.5),
+    ]
     return container(4.0, 6.0) + [
-        polygon(f"hexbox{i}", outline, position=(0.05 * i, 0.6 + 1.2 * i)) for i in range(4)]
+        polygon(f"hexbox{i}", outline, position=(0.05 * i, 0.6 + 1.2 * i)) for i in range(4)
+    ]
 
 
 def tiny():
     """Five 1 mm boxes dropped from 1 cm in a 1 cm wide box."""
     return container(0.01, 0.02, thickness=0.002) + [
-        box(f"grain{i}", 0.001, 0.001, position=(0.0002 * i, 0.001 + 0.0012 * i))
-        for i in range(5)]
+        box(f"grain{i}", 0.001, 0.001, position=(0.0002 * i, 0.001 + 0.0012 * i)) for i in range(5)
+    ]
 
 
 def huge():
     """Three 1 km boxes dropped on each other in a 4 km wide box."""
     return container(4000.0, 4000.0, thickness=100.0) + [
-        box(f"block{i}", 1000.0, 1000.0, position=(100.0 * i, 600.0 + 1100.0 * i))
-        for i in range(3)]
+        box(f"block{i}", 1000.0, 1000.0, position=(100.0 * i, 600.0 + 1100.0 * i)) for i in range(3)
+    ]
 
 
-CASES = {"fifty_vertices": (fifty_gons, 1.0), "sliver_1000_to_1": (slivers, 0.01),
-         "nearly_collinear": (nearly_collinear, 1.0), "tiny_1mm": (tiny, 0.001),
-         "huge_1km": (huge, 1000.0)}
+CASES = {
+    "fifty_vertices": (fifty_gons, 1.0),
+    "sliver_1000_to_1": (slivers, 0.01),
+    "nearly_collinear": (nearly_collinear, 1.0),
+    "tiny_1mm": (tiny, 0.001),
+    "huge_1km": (huge, 1000.0),
+}
 HUGE_STEPS = 1800  # 30 s: a 1 km box takes 15 s to fall its own height
 
 
@@ -70,8 +84,9 @@ def _sim(case: str, preset: str) -> Simulation:
     # scale (1 mm: dt = 5.3 ms): at 1/60 s a 1 mm grain falls several times its own size per
     # step, which no discrete step can resolve.
     dt = DT * min(1.0, (size / 0.01) ** 0.5) if size < 0.01 else DT
-    return Simulation(scene(*make(), preset=preset, gravity=(0.0, -9.81), dt=dt, friction=True,
-                            slop=slop))
+    return Simulation(
+        scene(*make(), preset=preset, gravity=(0.0, -9.81), dt=dt, friction=True, slop=slop)
+    )
 
 
 @pytest.mark.parametrize("preset", PRESET_NAMES)

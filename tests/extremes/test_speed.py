@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 from physics_helpers import box, scene
 
-from isaac.scene import load_scene
 from isaac.engine.simulation import Simulation
+from isaac.scene import load_scene
 
 from .helpers import with_preset
 
@@ -27,10 +27,16 @@ REST_GAP = 0.01  # m: with e = 0 the box must end touching the wall, not short o
 def _shoot(speed: float, offset: float, ccd: str) -> tuple[bool, float]:
     """(went through, final gap to the wall's face in m) for one shot from 0.5 m + offset."""
     start = -0.5 - offset * speed * DT
-    sim = Simulation(scene(
-        box("wall", WALL, 4.0, concrete=True),
-        box("bullet", BULLET, BULLET, position=(start, 0.0), velocity=(speed, 0.0)),
-        preset="balanced", ccd=ccd, gravity=(0.0, 0.0), dt=DT))
+    sim = Simulation(
+        scene(
+            box("wall", WALL, 4.0, concrete=True),
+            box("bullet", BULLET, BULLET, position=(start, 0.0), velocity=(speed, 0.0)),
+            preset="balanced",
+            ccd=ccd,
+            gravity=(0.0, 0.0),
+            dt=DT,
+        )
+    )
     steps = math.ceil((abs(start) + 2.0) / (speed * DT)) + 5
     crossed = False
     for _ in range(steps):
@@ -60,11 +66,11 @@ def test_ccd_stops_a_fast_box_at_the_wall_not_short_of_it():
         short[speed] = max(gaps)
     assert max(short.values()) < REST_GAP, (
         "stopped short of the wall by up to (m, per speed in m/s): "
-        + ", ".join(f"{v}: {g:.3g}" for v, g in short.items()))
+        + ", ".join(f"{v}: {g:.3g}" for v, g in short.items())
+    )
 
 
-def test_without_ccd_tunneling_begins_above_half_the_combined_thickness_per_step(
-        record_property):
+def test_without_ccd_tunneling_begins_above_half_the_combined_thickness_per_step(record_property):
     """Without ccd: below v dt = (WALL + BULLET) / 2 the push-out always picks the near side,
     so nothing passes; at 1000 m/s (16.7 m per step) everything does. The onset speed between
     is recorded (docs/tradeoff.md)."""
@@ -73,8 +79,11 @@ def test_without_ccd_tunneling_begins_above_half_the_combined_thickness_per_step
         fraction[speed] = np.mean([_shoot(speed, o, "off")[0] for o in _offsets()])
     onset = min((s for s in SCAN if fraction[s] > 0.0), default=None)
     record_property("tunneling_onset_mps", onset)
-    print(f"\ntunneling without ccd at dt = 1/60 s (fraction of {OFFSETS} offsets): "
-          + ", ".join(f"{s}: {fraction[s]:.2f}" for s in SCAN) + f"; onset {onset} m/s")
+    print(
+        f"\ntunneling without ccd at dt = 1/60 s (fraction of {OFFSETS} offsets): "
+        + ", ".join(f"{s}: {fraction[s]:.2f}" for s in SCAN)
+        + f"; onset {onset} m/s"
+    )
     safe = (WALL + BULLET) / 2 / DT  # 4.5 m/s
     assert all(fraction[s] == 0.0 for s in SCAN if s < safe), fraction
     assert fraction[1000] == 1.0, fraction

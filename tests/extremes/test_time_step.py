@@ -11,9 +11,9 @@ import numpy as np
 import pytest
 from physics_helpers import box, scene
 
-from isaac.scene import load_scene
-from isaac.engine.simulation import Simulation
 from isaac.app.tradeoff import analytic_trajectory, sample_times, simulate
+from isaac.engine.simulation import Simulation
+from isaac.scene import load_scene
 
 from .helpers import PRESET_NAMES, G, assert_finite, energy, ground, run, with_preset
 
@@ -26,11 +26,24 @@ ENERGY_GROWTH = 1.05  # relative, plus a few steps' worth of gravity (see below)
 def _drop(preset: str, dt: float) -> Simulation:
     # a spinning box 1 mm above the ground, falling at 1 m/s: contact within the first 1000
     # steps even at dt = 1e-5
-    return Simulation(scene(
-        ground(restitution=0.5),
-        box("box", 1.0, 1.0, position=(0.0, 0.501), velocity=(0.0, -1.0), angular_velocity=0.3,
-            restitution=0.5),
-        preset=preset, gravity=(0.0, -G), dt=dt, friction=True))
+    return Simulation(
+        scene(
+            ground(restitution=0.5),
+            box(
+                "box",
+                1.0,
+                1.0,
+                position=(0.0, 0.501),
+                velocity=(0.0, -1.0),
+                angular_velocity=0.3,
+                restitution=0.5,
+            ),
+            preset=preset,
+            gravity=(0.0, -G),
+            dt=dt,
+            friction=True,
+        )
+    )
 
 
 def _check_dt(preset: str, dt: float, max_steps: int) -> None:
@@ -43,8 +56,9 @@ def _check_dt(preset: str, dt: float, max_steps: int) -> None:
     # no explosion: energy above rest never exceeds the start by more than 5% plus four steps of
     # free-fall work (m g * g dt^2): a contact resolved a whole step late can gain about that.
     bound = ENERGY_GROWTH * e0 + 4 * sim.model.mass[1] * G * G * dt * dt
-    assert peak <= bound, f"dt={dt}: energy above rest reached {peak:.4g} J (start {e0:.4g} J, " \
-                          f"bound {bound:.4g} J)"
+    assert peak <= bound, (
+        f"dt={dt}: energy above rest reached {peak:.4g} J (start {e0:.4g} J, bound {bound:.4g} J)"
+    )
     assert sim.body("box").position[1] > 0.0, "the box fell through the ground"
 
 
@@ -63,8 +77,15 @@ def test_no_nan_or_energy_explosion_for_every_preset_and_dt(preset, dt):
 
 def _flight_error(integrator: str, dt: float) -> float:
     """Distance (m) after 1 s of free flight between the run and x0 + v0 t + g t^2 / 2."""
-    sim = Simulation(scene(box("ball", 0.2, 0.2, velocity=(3.0, 4.0)), preset="balanced",
-                           gravity=(0.0, -G), dt=dt, integrator=integrator))
+    sim = Simulation(
+        scene(
+            box("ball", 0.2, 0.2, velocity=(3.0, 4.0)),
+            preset="balanced",
+            gravity=(0.0, -G),
+            dt=dt,
+            integrator=integrator,
+        )
+    )
     steps = round(1.0 / dt)
     run(sim, steps)
     t = steps * dt
@@ -103,8 +124,9 @@ def test_bounce_error_against_closed_form_shrinks_at_first_order():
             sc = replace(sc, world=replace(sc.world, dt=dt, steps=round(3.0 / dt)))
             reference = analytic_trajectory(sc, times)
             run_ = simulate(sc, times)
-            d = np.linalg.norm(run_.position[:, box_index] - reference.position[:, box_index],
-                               axis=1)
+            d = np.linalg.norm(
+                run_.position[:, box_index] - reference.position[:, box_index], axis=1
+            )
             squared.append(np.mean(d * d))
         errors.append(float(np.sqrt(np.mean(squared))))
     orders = [math.log2(a / b) for a, b in itertools.pairwise(errors)]

@@ -35,14 +35,23 @@ def make_model(n: int, *, concrete_first: bool = True, seed: int = 0):
     inv_inertia = np.where(concrete, 0.0, 1.0 / inertia)
     return SimpleNamespace(
         names=[f"body{k}" if k else "ground" for k in range(n)],
-        mass=mass, inertia=inertia, inv_mass=inv_mass, inv_inertia=inv_inertia,
-        vertices_local=local, vertex_count=counts.astype(np.int64),
-        restitution=rng.uniform(0, 1, n), friction=rng.uniform(0, 1, n), concrete=concrete)
+        mass=mass,
+        inertia=inertia,
+        inv_mass=inv_mass,
+        inv_inertia=inv_inertia,
+        vertices_local=local,
+        vertex_count=counts.astype(np.int64),
+        restitution=rng.uniform(0, 1, n),
+        friction=rng.uniform(0, 1, n),
+        concrete=concrete,
+    )
 
 
 def make_scene(n: int, dt: float = 1.0 / 60.0, name: str = "synthetic") -> Scene:
-    bodies = tuple(BodySpec(name=f"body{k}" if k else "ground",
-                            vertices=((0.0, 0.0), (1.0, 0.0), (0.0, 1.0))) for k in range(n))
+    bodies = tuple(
+        BodySpec(name=f"body{k}" if k else "ground", vertices=((0.0, 0.0), (1.0, 0.0), (0.0, 1.0)))
+        for k in range(n)
+    )
     return Scene(name=name, world=WorldSettings(dt=dt), bodies=bodies, source="<synthetic>")
 
 
@@ -61,18 +70,34 @@ def make_contacts(rng, n: int, m: int) -> Contacts:
     slot = np.zeros(m, dtype=np.int32)
     push_a = rng.normal(0, 1e-3, (m, 2))
     return Contacts(
-        substep=np.zeros(m, dtype=np.int32), a=a, b=b,
-        feature=rng.integers(0, 64 ** 3, m).astype(np.int32), slot=slot,
-        point=rng.normal(0, 5, (m, 2)), normal=normal, depth=rng.uniform(0, 0.01, m),
-        push_a=push_a, push_b=-push_a, impulse=rng.uniform(0, 2, m),
-        tangent_impulse=rng.normal(0, 0.1, m), restitution=rng.uniform(0, 1, m))
+        substep=np.zeros(m, dtype=np.int32),
+        a=a,
+        b=b,
+        feature=rng.integers(0, 64**3, m).astype(np.int32),
+        slot=slot,
+        point=rng.normal(0, 5, (m, 2)),
+        normal=normal,
+        depth=rng.uniform(0, 0.01, m),
+        push_a=push_a,
+        push_b=-push_a,
+        impulse=rng.uniform(0, 2, m),
+        tangent_impulse=rng.normal(0, 0.1, m),
+        restitution=rng.uniform(0, 1, m),
+    )
 
 
 class SynthSim:
     """Deterministic pseudo-random states: ``n`` bodies, ``contacts`` contact rows per step."""
 
-    def __init__(self, n: int = 20, contacts: int = 10, *, dt: float = 1.0 / 60.0,
-                 seed: int = 0, leave_at: int | None = None) -> None:
+    def __init__(
+        self,
+        n: int = 20,
+        contacts: int = 10,
+        *,
+        dt: float = 1.0 / 60.0,
+        seed: int = 0,
+        leave_at: int | None = None,
+    ) -> None:
         self.model = make_model(n, seed=seed)
         self.scene = make_scene(n, dt)
         self.n = n
@@ -93,11 +118,16 @@ class SynthSim:
         if self.leave_at is not None and self.step_index >= self.leave_at:
             exists[-1] = False
         dt = self.scene.world.dt
-        return StepRecord(step=self.step_index, time=self.step_index * dt,
-                          position=self.position.copy(), angle=self.angle.copy(),
-                          velocity=self.velocity.copy(),
-                          angular_velocity=self.angular_velocity.copy(), exists=exists,
-                          contacts=contacts)
+        return StepRecord(
+            step=self.step_index,
+            time=self.step_index * dt,
+            position=self.position.copy(),
+            angle=self.angle.copy(),
+            velocity=self.velocity.copy(),
+            angular_velocity=self.angular_velocity.copy(),
+            exists=exists,
+            contacts=contacts,
+        )
 
     def record(self) -> StepRecord:
         return self._record(Contacts.empty())
@@ -106,7 +136,8 @@ class SynthSim:
         dt = self.scene.world.dt
         self.step_index += 1
         self.position[1:] += self.velocity[1:] * dt
-        self.angle[1:] = np.remainder(self.angle[1:] + self.angular_velocity[1:] * dt + np.pi,
-                                      2 * np.pi) - np.pi
+        self.angle[1:] = (
+            np.remainder(self.angle[1:] + self.angular_velocity[1:] * dt + np.pi, 2 * np.pi) - np.pi
+        )
         self.velocity[1:, 1] -= 9.81 * dt
         return self._record(make_contacts(self.rng, self.n, self.m))

@@ -36,5 +36,6 @@ def test_foxglove_scene_update_holds_outlines_and_contact_arrows(tmp_path):
         normals, impulses = contacts.lines
         assert len(normals.points) == len(impulses.points) == 2 * len(r.contacts)
         if len(r.contacts):
-            np.testing.assert_array_equal([normals.points[0].x, normals.points[0].y],
-                                          r.contacts.point[0])
+            np.testing.assert_array_equal(
+                [normals.points[0].x, normals.points[0].y], r.contacts.point[0]
+            )

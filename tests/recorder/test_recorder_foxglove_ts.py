@@ -39,8 +39,13 @@ def _node_modules() -> Path:
         MODULES.mkdir(parents=True, exist_ok=True)
         shutil.copy(JS / "package.json", MODULES / "package.json")
         try:
-            done = subprocess.run([npm, "install", "--no-audit", "--no-fund", "--silent"],
-                                  cwd=MODULES, capture_output=True, text=True, timeout=300)
+            done = subprocess.run(
+                [npm, "install", "--no-audit", "--no-fund", "--silent"],
+                cwd=MODULES,
+                capture_output=True,
+                text=True,
+                timeout=300,
+            )
         except subprocess.TimeoutExpired:
             pytest.skip("npm install timed out (no registry?)")
         if done.returncode != 0:
@@ -54,11 +59,21 @@ def test_every_channel_decodes_with_foxglove_typescript_stack_bit_for_bit(tmp_pa
     scene = tmp_path / "scene.yaml"
     scene.write_text(SCENE)
     log = tmp_path / "run.mcap"
-    run = subprocess.run([sys.executable, "-m", "isaac", "run", str(scene), "--quiet", "--mcap",
-                          str(log)], cwd=REPO, capture_output=True, text=True, timeout=300)
+    run = subprocess.run(
+        [sys.executable, "-m", "isaac", "run", str(scene), "--quiet", "--mcap", str(log)],
+        cwd=REPO,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
     assert run.returncode == 0, run.stderr
-    node = subprocess.run([shutil.which("node"), str(modules / "decode_mcap.mjs"), str(log)],
-                          cwd=modules, capture_output=True, text=True, timeout=120)
+    node = subprocess.run(
+        [shutil.which("node"), str(modules / "decode_mcap.mjs"), str(log)],
+        cwd=modules,
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
     assert node.returncode == 0, node.stderr
     decoded = json.loads(node.stdout)
 
@@ -70,10 +85,13 @@ def test_every_channel_decodes_with_foxglove_typescript_stack_bit_for_bit(tmp_pa
     for which, logged in (("first", steps[0].record), ("last", steps[-1].record)):
         js = decoded[which]
         assert js["step"] == logged.step
-        assert np.array_equal(np.array(js["position"], dtype=np.float64),
-                              logged.position.reshape(-1))
-        assert np.array_equal(np.array(js["velocity"], dtype=np.float64),
-                              logged.velocity.reshape(-1))
+        assert np.array_equal(
+            np.array(js["position"], dtype=np.float64), logged.position.reshape(-1)
+        )
+        assert np.array_equal(
+            np.array(js["velocity"], dtype=np.float64), logged.velocity.reshape(-1)
+        )
         assert np.array_equal(np.array(js["angle"], dtype=np.float64), logged.angle)
-        assert np.array_equal(np.array(js["angularVelocity"], dtype=np.float64),
-                              logged.angular_velocity)
+        assert np.array_equal(
+            np.array(js["angularVelocity"], dtype=np.float64), logged.angular_velocity
+        )

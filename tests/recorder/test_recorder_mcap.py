@@ -18,8 +18,8 @@ import pytest
 from google.protobuf import descriptor_pb2, descriptor_pool, message_factory
 from mcap.reader import make_reader
 
-from isaac.errors import LogError, SimulationError
 from isaac.engine.records import StepRecord
+from isaac.errors import LogError, SimulationError
 from recorder import Recorder
 from recorder.reader import LogReader
 
@@ -33,8 +33,13 @@ PYTHON = sys.executable
 def record_run(path, *, n=20, contacts=8, steps=250, rrd=None, leave_at=None, **kwargs):
     sim = SynthSim(n, contacts, leave_at=leave_at)
     records = [sim.record()] + [sim.step() for _ in range(steps)]
-    with Recorder(sim, mcap_path=str(path), rrd_path=None if rrd is None else str(rrd),
-                  scene_text=SCENE_TEXT, **kwargs) as rec:
+    with Recorder(
+        sim,
+        mcap_path=str(path),
+        rrd_path=None if rrd is None else str(rrd),
+        scene_text=SCENE_TEXT,
+        **kwargs,
+    ) as rec:
         for r in records:
             rec.write(r)
     return sim, records
@@ -53,7 +58,8 @@ def generic_messages(path):
                 for fd in fds.file:
                     pool.Add(fd)
                 classes[schema.id] = message_factory.GetMessageClass(
-                    pool.FindMessageTypeByName(schema.name))
+                    pool.FindMessageTypeByName(schema.name)
+                )
             assert schema.encoding == "protobuf" and channel.message_encoding == "protobuf"
             out.append((channel.topic, message, classes[schema.id].FromString(message.data)))
     return out
@@ -77,8 +83,17 @@ def test_generic_protobuf_reader_gets_every_float_bit_exact(tmp_path):
         np.testing.assert_array_equal(np.array(b.angular_velocity), r.angular_velocity)
         np.testing.assert_array_equal(np.array(b.exists, dtype=bool), r.exists)
         rc = r.contacts
-        for name in ("substep", "a", "b", "feature", "slot", "depth", "impulse",
-                     "tangent_impulse", "restitution"):
+        for name in (
+            "substep",
+            "a",
+            "b",
+            "feature",
+            "slot",
+            "depth",
+            "impulse",
+            "tangent_impulse",
+            "restitution",
+        ):
             np.testing.assert_array_equal(np.array(getattr(c, name)), getattr(rc, name))
         for name in ("point", "normal", "push_a", "push_b"):
             got = np.array(getattr(c, name)).reshape(-1, 2)
@@ -93,10 +108,14 @@ def test_generic_protobuf_reader_gets_every_float_bit_exact(tmp_path):
     for k, b in enumerate(first.bodies):
         assert b.index == k
         c = int(model.vertex_count[k])
-        np.testing.assert_array_equal(np.array(b.vertices_local).reshape(-1, 2),
-                                      model.vertices_local[k, :c])
-        assert (b.mass, b.inertia, b.restitution) == (model.mass[k], model.inertia[k],
-                                                      model.restitution[k])
+        np.testing.assert_array_equal(
+            np.array(b.vertices_local).reshape(-1, 2), model.vertices_local[k, :c]
+        )
+        assert (b.mass, b.inertia, b.restitution) == (
+            model.mass[k],
+            model.inertia[k],
+            model.restitution[k],
+        )
         assert b.concrete == bool(model.concrete[k]) and b.exists
     assert not worlds[1][1].bodies[-1].exists
 
@@ -104,7 +123,7 @@ def test_generic_protobuf_reader_gets_every_float_bit_exact(tmp_path):
 def test_log_time_is_step_times_dt_in_integer_nanoseconds(tmp_path):
     path = tmp_path / "run.mcap"
     record_run(path, steps=30)
-    for topic, raw, decoded in generic_messages(path):
+    for _topic, raw, decoded in generic_messages(path):
         assert raw.sequence == decoded.step
         assert raw.log_time == raw.publish_time == round(decoded.step * (1 / 60) * 1e9)
 
@@ -118,12 +137,24 @@ def test_metadata_and_scene_attachment_come_before_any_chunk(tmp_path):
         attachments = {a.name: a for a in reader.iter_attachments()}
         summary = reader.get_summary()
     isaac = meta["isaac"]
-    for key in ("engine_version", "python_version", "numpy_version", "numba_version",
-                "platform", "cpu", "scene_sha256", "settings", "world.dt", "world.gravity",
-                "world.fidelity", "world.solver"):
+    for key in (
+        "engine_version",
+        "python_version",
+        "numpy_version",
+        "numba_version",
+        "platform",
+        "cpu",
+        "scene_sha256",
+        "settings",
+        "world.dt",
+        "world.gravity",
+        "world.fidelity",
+        "world.solver",
+    ):
         assert key in isaac, key
     assert attachments["scene.yaml"].data.decode() == SCENE_TEXT
     import hashlib
+
     assert isaac["scene_sha256"] == hashlib.sha256(SCENE_TEXT.encode()).hexdigest()
     first_chunk = min(c.chunk_start_offset for c in summary.chunk_indexes)
     assert all(i.offset < first_chunk for i in summary.metadata_indexes if i.name == "isaac")
@@ -184,8 +215,16 @@ def test_nan_stops_the_run_naming_step_and_body_and_keeps_earlier_steps(tmp_path
                 if r.step == 6:
                     pos = r.position.copy()
                     pos[3, 1] = np.nan
-                    r = StepRecord(r.step, r.time, pos, r.angle, r.velocity,
-                                   r.angular_velocity, r.exists, r.contacts)
+                    r = StepRecord(
+                        r.step,
+                        r.time,
+                        pos,
+                        r.angle,
+                        r.velocity,
+                        r.angular_velocity,
+                        r.exists,
+                        r.contacts,
+                    )
                 rec.write(r)
                 written.append(r.step)
     assert info.value.step == 6 and info.value.body == "body3"
@@ -205,14 +244,14 @@ def _flushed_steps(clean_path, cut):
         steps = set()
         for ci in summary.chunk_indexes:
             if ci.chunk_start_offset + ci.chunk_length <= cut:
-                for _, _, m in reader.iter_messages(starting_at=ci.message_start_time,
-                                                    ending_at=ci.message_end_time):
+                for _, _, m in reader.iter_messages(
+                    starting_at=ci.message_start_time, ending_at=ci.message_end_time
+                ):
                     steps.add(m.sequence)
     return steps
 
 
-def test_file_cut_at_60_percent_is_inspected_and_recovered_without_losing_flushed_steps(
-        tmp_path):
+def test_file_cut_at_60_percent_is_inspected_and_recovered_without_losing_flushed_steps(tmp_path):
     clean = tmp_path / "clean.mcap"
     _, records = record_run(clean, n=30, contacts=12, steps=450)
     data = clean.read_bytes()
@@ -224,7 +263,7 @@ def test_file_cut_at_60_percent_is_inspected_and_recovered_without_losing_flushe
     log = LogReader(str(partial))
     assert not log.closed_cleanly and log.end is None
     got = [s.step for s in log.steps()]
-    assert got[:len(expected)] == expected
+    assert got[: len(expected)] == expected
     assert got == list(range(len(got)))
 
     out = run_cli("inspect", str(partial))
@@ -264,8 +303,7 @@ while True:
 def test_sigkilled_writer_leaves_a_partial_file_with_every_flushed_step(tmp_path):
     path = tmp_path / "killed.mcap"
     script = _KILLED_WRITER.format(synth_dir=str(Path(__file__).parent), path=str(path))
-    proc = subprocess.Popen([PYTHON, "-c", script], stdout=subprocess.PIPE, text=True,
-                            cwd=REPO)
+    proc = subprocess.Popen([PYTHON, "-c", script], stdout=subprocess.PIPE, text=True, cwd=REPO)
     last = 0
     try:
         for line in proc.stdout:
@@ -318,8 +356,9 @@ def _children(pid: int) -> list[int]:
 
 
 def run_cli(*args):
-    return subprocess.run([PYTHON, "-m", "isaac", *args], capture_output=True, text=True,
-                          cwd=REPO, timeout=300)
+    return subprocess.run(
+        [PYTHON, "-m", "isaac", *args], capture_output=True, text=True, cwd=REPO, timeout=300
+    )
 
 
 @pytest.mark.parametrize("content", [b"", os.urandom(4096), b"\x89MCAP0\r\n" + b"\0" * 100])
@@ -334,6 +373,7 @@ def test_inspect_rejects_bad_files_in_one_line(tmp_path, content):
 
 def test_inspect_rejects_an_mcap_that_is_not_an_isaac_log(tmp_path):
     from mcap.writer import Writer
+
     path = tmp_path / "other.mcap"
     with open(path, "wb") as f:
         w = Writer(f)
@@ -372,6 +412,7 @@ def test_inspect_prints_summary_and_step_table(tmp_path):
 def test_foreground_and_background_writers_write_the_same_bytes(tmp_path):
     from recorder.mcap_writer import McapLogWriter
     from recorder.stats import compute_stats
+
     sim = SynthSim(10, 4)
     records = [sim.record()] + [sim.step() for _ in range(150)]
     for bg, name in ((False, "fg.mcap"), (True, "bg.mcap")):

@@ -20,8 +20,8 @@ import numpy as np
 import pytest
 
 pytest.importorskip("isaac.engine.simulation")
-from isaac.scene import load_scene_text  # noqa: E402
 from isaac.engine.simulation import Simulation  # noqa: E402
+from isaac.scene import load_scene_text  # noqa: E402
 from recorder import Recorder  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).parent))
@@ -64,8 +64,13 @@ def _cross(r, n):
 
 def _world_vertices(local, position, angle):
     c, s = np.cos(angle), np.sin(angle)
-    return np.stack([position[0] + c * local[:, 0] - s * local[:, 1],
-                     position[1] + s * local[:, 0] + c * local[:, 1]], axis=1)
+    return np.stack(
+        [
+            position[0] + c * local[:, 0] - s * local[:, 1],
+            position[1] + s * local[:, 0] + c * local[:, 1],
+        ],
+        axis=1,
+    )
 
 
 def _overlap(pa, pb):
@@ -97,8 +102,12 @@ def logged_run(tmp_path, text):
 
 
 def _state(m):
-    return (np.array(m.position).reshape(-1, 2), np.array(m.angle),
-            np.array(m.velocity).reshape(-1, 2), np.array(m.angular_velocity))
+    return (
+        np.array(m.position).reshape(-1, 2),
+        np.array(m.angle),
+        np.array(m.velocity).reshape(-1, 2),
+        np.array(m.angular_velocity),
+    )
 
 
 @pytest.mark.parametrize("name", sorted(SCENES))
@@ -132,8 +141,9 @@ def test_logged_collisions_match_the_seed_formulas(tmp_path, name):
         assert c.depth[0] == pytest.approx(_overlap(va, vb), abs=1e-9)
         # the push separates them (the seed's full MTD push: touching, no overlap left)
         pa_hit, pb_hit = p0[a] + push_a, p0[b] + push_b
-        after = _overlap(_world_vertices(local[a], pa_hit, ang0[a]),
-                         _world_vertices(local[b], pb_hit, ang0[b]))
+        after = _overlap(
+            _world_vertices(local[a], pa_hit, ang0[a]), _world_vertices(local[b], pb_hit, ang0[b])
+        )
         assert after <= 1e-9
 
         # the impulse: the seed's formula from logged quantities
@@ -165,6 +175,7 @@ def test_head_on_equal_masses_exchange_velocities_in_the_log(tmp_path):
 def test_log_alone_is_enough_to_resimulate_bit_for_bit(tmp_path):
     from isaac.engine import diagnostics
     from recorder.reader import LogReader
+
     _world, _bodies, _contacts = logged_run(tmp_path, OFF_CENTRE)
     log = LogReader(str(tmp_path / "off_centre_log.mcap"))
     sim = Simulation(log.scene())

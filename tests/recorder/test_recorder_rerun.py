@@ -62,8 +62,7 @@ def test_rerun_bodies_are_closed_outlines_and_stats_are_series(tmp_path):
     energy = rrd_rows(rrd, "/stats/kinetic_energy", "Scalars:scalars")
     assert len(energy) == len(records)
     names = {c.entity_path for c in RrdReader(str(rrd)).stream()}
-    assert {"/world", "/world/bodies/concrete", "/world/normals", "/world/push",
-            "/info"} <= names
+    assert {"/world", "/world/bodies/concrete", "/world/normals", "/world/push", "/info"} <= names
 
 
 def test_view_converts_an_mcap_log_on_the_fly(tmp_path):
@@ -78,6 +77,7 @@ def test_view_converts_an_mcap_log_on_the_fly(tmp_path):
 
 def test_mcap_to_rrd_conversion_keeps_every_step(tmp_path):
     from recorder.rerun_writer import mcap_to_rrd
+
     mcap = tmp_path / "run.mcap"
     _, records = record_run(mcap, steps=40)
     rrd = mcap_to_rrd(str(mcap), str(tmp_path / "conv.rrd"))
@@ -88,9 +88,23 @@ def test_mcap_to_rrd_conversion_keeps_every_step(tmp_path):
 def test_isaac_run_killed_with_sigkill_leaves_a_recoverable_log(tmp_path):
     pytest.importorskip("isaac.engine.simulation")
     out = tmp_path / "pile.mcap"
-    proc = subprocess.Popen([PYTHON, "-m", "isaac", "run", "scenes/pile.yaml", "--steps",
-                             "100000", "--mcap", str(out), "--quiet"], cwd=REPO,
-                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    proc = subprocess.Popen(
+        [
+            PYTHON,
+            "-m",
+            "isaac",
+            "run",
+            "scenes/pile.yaml",
+            "--steps",
+            "100000",
+            "--mcap",
+            str(out),
+            "--quiet",
+        ],
+        cwd=REPO,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
     partial = Path(str(out) + ".partial")
     try:
         deadline = time.time() + 240
@@ -119,9 +133,26 @@ def test_isaac_run_killed_with_sigkill_leaves_a_recoverable_log(tmp_path):
 def test_isaac_run_stopped_with_sigterm_finishes_both_files_and_says_where(tmp_path):
     pytest.importorskip("isaac.engine.simulation")
     mcap, rrd = tmp_path / "pile.mcap", tmp_path / "pile.rrd"
-    proc = subprocess.Popen([PYTHON, "-m", "isaac", "run", "scenes/pile.yaml", "--steps",
-                             "100000", "--mcap", str(mcap), "--rrd", str(rrd), "--quiet"],
-                            cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    proc = subprocess.Popen(
+        [
+            PYTHON,
+            "-m",
+            "isaac",
+            "run",
+            "scenes/pile.yaml",
+            "--steps",
+            "100000",
+            "--mcap",
+            str(mcap),
+            "--rrd",
+            str(rrd),
+            "--quiet",
+        ],
+        cwd=REPO,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     partial = Path(str(mcap) + ".partial")
     try:
         deadline = time.time() + 240

@@ -13,8 +13,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from isaac.errors import LogError, SimulationError
 from isaac.engine.records import Contacts, StepRecord, state_hash
+from isaac.errors import LogError, SimulationError
 from recorder import Recorder
 from recorder import writer_process as W
 from recorder.reader import LogReader
@@ -56,9 +56,11 @@ def _packer(ring, sim):
     proc = W.WriterProcess.__new__(W.WriterProcess)
     proc._view = memoryview(ring)
     proc._ring_u8 = ring
-    proc._stats_model = W._Namespace(mass=np.asarray(sim.model.mass, dtype=float),
-                                     inertia=np.asarray(sim.model.inertia, dtype=float),
-                                     concrete=np.asarray(sim.model.concrete, dtype=bool))
+    proc._stats_model = W._Namespace(
+        mass=np.asarray(sim.model.mass, dtype=float),
+        inertia=np.asarray(sim.model.inertia, dtype=float),
+        concrete=np.asarray(sim.model.concrete, dtype=bool),
+    )
     proc._gravity = (0.0, -9.81)
     return proc
 
@@ -81,7 +83,7 @@ def test_the_compiled_encoder_writes_the_reference_encoders_bytes_and_stats():
         stats = compute_stats(sim.model, (0.0, -9.81), r, with_hash=False)
         size = W.frame_size(r)
         assert proc._compiled_pack(8, r, None)
-        frame = bytes(ring[8:8 + size])
+        frame = bytes(ring[8 : 8 + size])
         assert W._HEAD.size == HEAD_BYTES
         assert frame == W.pack(r, stats)  # compiled and reference encoding agree byte for byte
         got = W.Frame(frame)
@@ -93,8 +95,9 @@ def test_the_compiled_encoder_writes_the_reference_encoders_bytes_and_stats():
         _assert_same_record(got.record(), r)
 
 
-@pytest.mark.parametrize("field", ["position", "angular_velocity", "normal", "impulse",
-                                   "restitution"])
+@pytest.mark.parametrize(
+    "field", ["position", "angular_velocity", "normal", "impulse", "restitution"]
+)
 @pytest.mark.parametrize("bad", [np.nan, np.inf])
 def test_the_compiled_encoder_refuses_a_nan_or_infinity_in_any_float_field(field, bad):
     from recorder.pack import BODY_FIELDS, CONTACT_FIELDS, pack_layout
@@ -104,12 +107,33 @@ def test_the_compiled_encoder_refuses_a_nan_or_infinity_in_any_float_field(field
     ring = np.zeros(1 << 20, dtype=np.uint8)
     assert not _packer(ring, sim)._compiled_pack(0, r, None)
     c = r.contacts
-    bad_field = pack_layout(ring, 64, 3, 0.05, len(r.angle), len(c), 4096, r.position, r.angle,
-                            r.velocity, r.angular_velocity, r.exists, c.point, c.normal,
-                            c.depth, c.push_a, c.push_b, c.impulse, c.tangent_impulse,
-                            c.restitution, np.asarray(sim.model.mass, dtype=float),
-                            np.asarray(sim.model.inertia, dtype=float),
-                            np.asarray(sim.model.concrete, dtype=bool), 0.0, -9.81)[0]
+    bad_field = pack_layout(
+        ring,
+        64,
+        3,
+        0.05,
+        len(r.angle),
+        len(c),
+        4096,
+        r.position,
+        r.angle,
+        r.velocity,
+        r.angular_velocity,
+        r.exists,
+        c.point,
+        c.normal,
+        c.depth,
+        c.push_a,
+        c.push_b,
+        c.impulse,
+        c.tangent_impulse,
+        c.restitution,
+        np.asarray(sim.model.mass, dtype=float),
+        np.asarray(sim.model.inertia, dtype=float),
+        np.asarray(sim.model.concrete, dtype=bool),
+        0.0,
+        -9.81,
+    )[0]
     assert bad_field == (BODY_FIELDS + CONTACT_FIELDS).index(field)
 
 
@@ -124,8 +148,7 @@ def _rerun_packer(ring, sim):
     return proc
 
 
-_RERUN_FIELDS = ("position", "angle", "exists", "point", "normal", "impulse", "push_a",
-                 "push_b")
+_RERUN_FIELDS = ("position", "angle", "exists", "point", "normal", "impulse", "push_a", "push_b")
 
 
 def test_the_rerun_frame_round_trips_every_field_bit_for_bit():
@@ -141,10 +164,33 @@ def test_the_rerun_frame_round_trips_every_field_bit_for_bit():
     model = _packer(ring, sim)._stats_model
     for r in records:
         c = r.contacts
-        assert pack_rerun(ring, 24, r.step, r.time, r.position, r.angle, r.exists, r.velocity,
-                          r.angular_velocity, c.point, c.normal, c.depth, c.push_a, c.push_b,
-                          c.impulse, c.tangent_impulse, c.restitution, model.mass,
-                          model.inertia, model.concrete, 0.0, -9.81) == -1
+        assert (
+            pack_rerun(
+                ring,
+                24,
+                r.step,
+                r.time,
+                r.position,
+                r.angle,
+                r.exists,
+                r.velocity,
+                r.angular_velocity,
+                c.point,
+                c.normal,
+                c.depth,
+                c.push_a,
+                c.push_b,
+                c.impulse,
+                c.tangent_impulse,
+                c.restitution,
+                model.mass,
+                model.inertia,
+                model.concrete,
+                0.0,
+                -9.81,
+            )
+            == -1
+        )
         frame = W.read_rerun_frame(ring, 24)
         assert (frame.step, frame.time) == (r.step, r.time)
         for name in _RERUN_FIELDS:
@@ -157,8 +203,20 @@ def test_the_rerun_frame_round_trips_every_field_bit_for_bit():
         assert W.rerun_frame_size(r) % 8 == 0
 
 
-_FLOAT_FIELDS = ("position", "angle", "velocity", "angular_velocity", "point", "normal",
-                 "depth", "push_a", "push_b", "impulse", "tangent_impulse", "restitution")
+_FLOAT_FIELDS = (
+    "position",
+    "angle",
+    "velocity",
+    "angular_velocity",
+    "point",
+    "normal",
+    "depth",
+    "push_a",
+    "push_b",
+    "impulse",
+    "tangent_impulse",
+    "restitution",
+)
 
 
 @pytest.mark.parametrize("field", _FLOAT_FIELDS)
@@ -176,10 +234,30 @@ def test_the_rerun_frame_refuses_a_nan_or_infinity_in_any_float_field(field, bad
     assert (proc.head, bytes(proc._pending)) == (head, pending)
     c = r.contacts
     model = proc._stats_model
-    got = proc._pack_rerun(ring, 0, r.step, r.time, r.position, r.angle, r.exists, r.velocity,
-                           r.angular_velocity, c.point, c.normal, c.depth, c.push_a, c.push_b,
-                           c.impulse, c.tangent_impulse, c.restitution, model.mass,
-                           model.inertia, model.concrete, 0.0, -9.81)
+    got = proc._pack_rerun(
+        ring,
+        0,
+        r.step,
+        r.time,
+        r.position,
+        r.angle,
+        r.exists,
+        r.velocity,
+        r.angular_velocity,
+        c.point,
+        c.normal,
+        c.depth,
+        c.push_a,
+        c.push_b,
+        c.impulse,
+        c.tangent_impulse,
+        c.restitution,
+        model.mass,
+        model.inertia,
+        model.concrete,
+        0.0,
+        -9.81,
+    )
     assert got == (BODY_FIELDS + CONTACT_FIELDS).index(field)
 
 
@@ -195,13 +273,17 @@ def _rrd_content(path):
         cols = {}
         for name in batch.schema.names:
             if "rowid" in name.lower().replace("_", "") or name in (
-                    "log_time", "RecordingInfo:start_time"):
+                "log_time",
+                "RecordingInfo:start_time",
+            ):
                 continue
             col = batch.column(name)
             cols[name] = col.cast(pa.int64()) if pa.types.is_duration(col.type) else col
         out.setdefault((chunk.entity_path, tuple(sorted(cols))), []).append(cols)
-    return {key: {name: pa.concat_arrays([c[name] for c in chunks]) for name in chunks[0]}
-            for key, chunks in out.items()}
+    return {
+        key: {name: pa.concat_arrays([c[name] for c in chunks]) for name in chunks[0]}
+        for key, chunks in out.items()
+    }
 
 
 # 5,424-byte frames (40 bodies, 60 contact rows): 8 KiB holds one at a time (every step
@@ -215,9 +297,12 @@ def test_the_rerun_writer_process_writes_what_writing_in_process_does(tmp_path, 
         path = tmp_path / f"{offload}.rrd"
         rec = Recorder(sim, rrd_path=str(path), scene_text=SCENE_TEXT, offload=offload)
         if offload == "process" and ring_bytes is not None:
-            config = {"model": W.model_table(rec.model), "gravity": rec.gravity,
-                      "scene": {"name": str(rec.scene.name), "dt": float(rec.scene.world.dt)},
-                      "impulse_scale": None}
+            config = {
+                "model": W.model_table(rec.model),
+                "gravity": rec.gravity,
+                "scene": {"name": str(rec.scene.name), "dt": float(rec.scene.world.dt)},
+                "impulse_scale": None,
+            }
             rec.rerun.close()
             rec.rerun = W.WriterProcess("rerun", str(path), config, ring_bytes=ring_bytes)
         for r in records:
@@ -250,19 +335,24 @@ def test_writer_processes_write_the_same_bytes_as_writing_in_process(tmp_path, r
 
 def _mcap_config(rec):
     from recorder.mcap_writer import build_metadata
-    return {"model": W.model_table(rec.model), "gravity": rec.gravity,
-            "scene": {"name": str(rec.scene.name), "dt": float(rec.scene.world.dt)},
-            "scene_text": rec.scene_text,
-            "metadata": build_metadata(rec.scene, rec.scene_text, len(rec.model.names)),
-            "flush_every": 100, "compression": "none", "foxglove": None}
+
+    return {
+        "model": W.model_table(rec.model),
+        "gravity": rec.gravity,
+        "scene": {"name": str(rec.scene.name), "dt": float(rec.scene.world.dt)},
+        "scene_text": rec.scene_text,
+        "metadata": build_metadata(rec.scene, rec.scene_text, len(rec.model.names)),
+        "flush_every": 100,
+        "compression": "none",
+        "foxglove": None,
+    }
 
 
 def test_a_frame_larger_than_the_ring_goes_inline_and_arrives_whole(tmp_path):
     sim, records = _records(n=40, contacts=30, steps=20)
     rec = Recorder(sim, mcap_path=str(tmp_path / "a.mcap"), scene_text=SCENE_TEXT)
     rec.mcap.close()
-    rec.mcap = W.WriterProcess("mcap", str(tmp_path / "a.mcap"), _mcap_config(rec),
-                               ring_bytes=4096)
+    rec.mcap = W.WriterProcess("mcap", str(tmp_path / "a.mcap"), _mcap_config(rec), ring_bytes=4096)
     assert W.frame_size(records[5]) > 4096
     for r in records:
         rec.write(r)
@@ -293,13 +383,15 @@ def test_nan_through_the_rerun_writer_process_names_step_and_contact(tmp_path):
     bad = records[25]
     depth = bad.contacts.depth.copy()  # a field the Rerun frame leaves out, checked all the same
     depth[2] = np.inf
-    records[25] = dataclasses.replace(bad, contacts=dataclasses.replace(bad.contacts,
-                                                                        depth=depth))
+    records[25] = dataclasses.replace(bad, contacts=dataclasses.replace(bad.contacts, depth=depth))
     rec = Recorder(sim, rrd_path=str(tmp_path / "nan.rrd"), scene_text=SCENE_TEXT)
     c = bad.contacts
     name_a, name_b = sim.model.names[c.a[2]], sim.model.names[c.b[2]]
-    with pytest.raises(SimulationError, match=rf"step 25: contact between '{name_a}' and "
-                                              rf"'{name_b}' has a non-finite depth"):
+    with pytest.raises(
+        SimulationError,
+        match=rf"step 25: contact between '{name_a}' and "
+        rf"'{name_b}' has a non-finite depth",
+    ):
         with rec:
             for r in records:
                 rec.write(r)
@@ -319,8 +411,11 @@ def test_a_writer_process_that_dies_is_reported_with_the_file_name(tmp_path):
     rec.wait_ready()
     os.kill(rec.mcap.proc.pid, signal.SIGKILL)
     rec.mcap.proc.wait()
-    with pytest.raises(LogError, match=r"writing .*dead\.mcap\.partial failed: the writer "
-                                       r"process stopped \(exit code -9\)"):
+    with pytest.raises(
+        LogError,
+        match=r"writing .*dead\.mcap\.partial failed: the writer "
+        r"process stopped \(exit code -9\)",
+    ):
         for r in records:
             rec.write(r)
         rec.close()
@@ -356,8 +451,12 @@ def test_drain_returns_once_every_step_is_written(tmp_path):
 def test_writer_processes_get_cpus_of_their_own_until_the_recorder_closes(tmp_path):
     sim, records = _records(steps=5)
     before = os.sched_getaffinity(0)
-    rec = Recorder(sim, mcap_path=str(tmp_path / "a.mcap"), rrd_path=str(tmp_path / "a.rrd"),
-                   scene_text=SCENE_TEXT)
+    rec = Recorder(
+        sim,
+        mcap_path=str(tmp_path / "a.mcap"),
+        rrd_path=str(tmp_path / "a.rrd"),
+        scene_text=SCENE_TEXT,
+    )
     mine = os.sched_getaffinity(0)
     theirs = [os.sched_getaffinity(w.proc.pid) for w in (rec.mcap, rec.rerun)]
     assert all(t and not (t & mine) for t in theirs)  # apart from the simulation's CPUs
@@ -372,8 +471,7 @@ def test_a_failure_in_the_rerun_sender_thread_is_raised_by_the_next_call(tmp_pat
     from recorder.rerun_writer import RerunLogWriter
 
     sim, records = _records(steps=30)
-    w = RerunLogWriter(str(tmp_path / "t.rrd"), sim.model, sim.scene, batch=10,
-                       background=True)
+    w = RerunLogWriter(str(tmp_path / "t.rrd"), sim.model, sim.scene, batch=10, background=True)
 
     def fail(*args):
         raise RuntimeError("disk on fire")
@@ -407,21 +505,26 @@ def test_rerun_batches_grow_for_bodies_entering_and_more_contact_rows(tmp_path):
     strips, points = {}, {}
     for chunk in RrdReader(str(path)).stream():
         batch = chunk.to_record_batch()
-        for out, entity, name in ((strips, "/world/bodies/moving", "LineStrips2D:strips"),
-                                  (points, "/world/contacts", "Points2D:positions")):
+        for out, entity, name in (
+            (strips, "/world/bodies/moving", "LineStrips2D:strips"),
+            (points, "/world/contacts", "Points2D:positions"),
+        ):
             if chunk.entity_path == entity and name in batch.schema.names:
-                out.update(zip(batch.column("step").to_pylist(),
-                               batch.column(name).to_pylist()))
+                out.update(zip(batch.column("step").to_pylist(), batch.column(name).to_pylist()))
     local, counts = sim.model.vertices_local, sim.model.vertex_count
     for r in records:
         moving = np.flatnonzero(r.exists & ~sim.model.concrete)
         assert len(strips[r.step]) == moving.size
         for body, strip in zip(moving, strips[r.step]):
             c, s = np.cos(r.angle[body]), np.sin(r.angle[body])
-            v = local[body, :counts[body]]
-            want = r.position[body] + np.stack([v[:, 0] * c - v[:, 1] * s,
-                                                v[:, 0] * s + v[:, 1] * c], axis=1)
-            np.testing.assert_allclose(np.array(strip), np.vstack([want, want[:1]]),
-                                       rtol=1e-6, atol=1e-5)
-        np.testing.assert_array_equal(np.array(points[r.step], dtype=np.float32).reshape(-1, 2),
-                                      r.contacts.point.astype(np.float32).reshape(-1, 2))
+            v = local[body, : counts[body]]
+            want = r.position[body] + np.stack(
+                [v[:, 0] * c - v[:, 1] * s, v[:, 0] * s + v[:, 1] * c], axis=1
+            )
+            np.testing.assert_allclose(
+                np.array(strip), np.vstack([want, want[:1]]), rtol=1e-6, atol=1e-5
+            )
+        np.testing.assert_array_equal(
+            np.array(points[r.step], dtype=np.float32).reshape(-1, 2),
+            r.contacts.point.astype(np.float32).reshape(-1, 2),
+        )

@@ -11,8 +11,8 @@ from mcap.writer import CompressionType, Writer
 
 from isaac.engine.diagnostics import state_hash
 from isaac.engine.records import Contacts, StepRecord
-from isaac.scene import load_scene, load_scene_text
 from isaac.engine.simulation import Simulation
+from isaac.scene import load_scene, load_scene_text
 from recorder import Recorder
 from recorder import schema as S
 from recorder.mcap_writer import encode_bodies, encode_contacts
@@ -91,8 +91,9 @@ def scene_from(text_or_name: str, *, steps: int | None = None):
     return scene, (scene.world.steps if steps is None else steps)
 
 
-def record(path: Path, scene_text_or_name: str, *, steps: int | None = None,
-           compression: str = "lz4") -> list[str]:
+def record(
+    path: Path, scene_text_or_name: str, *, steps: int | None = None, compression: str = "lz4"
+) -> list[str]:
     """Run a scene with the Recorder writing ``path``; returns the state hash of every step."""
     scene, steps = scene_from(scene_text_or_name, steps=steps)
     sim = Simulation(scene)
@@ -114,8 +115,9 @@ def run_hashes(scene_text_or_name: str, *, steps: int | None = None) -> list[str
     return [state_hash(sim.record())] + [state_hash(r) for r in sim.run(steps)]
 
 
-def rewrite(src: Path, dst: Path, *, message=None, scene=None, metadata=None,
-            fix_scene_hash: bool = True) -> None:
+def rewrite(
+    src: Path, dst: Path, *, message=None, scene=None, metadata=None, fix_scene_hash: bool = True
+) -> None:
     """Copy the clean log ``src`` to ``dst`` with the same layout, changing one thing.
 
     message(topic, step, data) -> bytes | None: new payload (None drops the message).
@@ -151,8 +153,9 @@ def rewrite(src: Path, dst: Path, *, message=None, scene=None, metadata=None,
             if sc.id not in schema_ids:
                 schema_ids[sc.id] = w.register_schema(sc.name, sc.encoding, sc.data)
             if ch.id not in channel_ids:
-                channel_ids[ch.id] = w.register_channel(topic, ch.message_encoding,
-                                                        schema_ids[sc.id], dict(ch.metadata))
+                channel_ids[ch.id] = w.register_channel(
+                    topic, ch.message_encoding, schema_ids[sc.id], dict(ch.metadata)
+                )
             data = m.data if message is None else message(topic, m.sequence, m.data)
             if data is not None:
                 w.add_message(channel_ids[ch.id], m.log_time, data, m.publish_time, m.sequence)
@@ -165,14 +168,21 @@ def rewrite(src: Path, dst: Path, *, message=None, scene=None, metadata=None,
 def bodies_with(data: bytes, change) -> bytes:
     """Re-encode a ``/bodies`` payload after ``change(arrays)`` edits a dict of writable arrays."""
     d = S.decode("Bodies", data)
-    arrays = {k: np.array(d[k]) for k in ("position", "angle", "velocity", "angular_velocity",
-                                          "exists")}
+    arrays = {
+        k: np.array(d[k]) for k in ("position", "angle", "velocity", "angular_velocity", "exists")
+    }
     change(arrays)
     n = arrays["angle"].size
-    rec = StepRecord(step=d["step"], time=d["time"], position=arrays["position"].reshape(n, 2),
-                     angle=arrays["angle"], velocity=arrays["velocity"].reshape(n, 2),
-                     angular_velocity=arrays["angular_velocity"], exists=arrays["exists"],
-                     contacts=Contacts.empty())
+    rec = StepRecord(
+        step=d["step"],
+        time=d["time"],
+        position=arrays["position"].reshape(n, 2),
+        angle=arrays["angle"],
+        velocity=arrays["velocity"].reshape(n, 2),
+        angular_velocity=arrays["angular_velocity"],
+        exists=arrays["exists"],
+        contacts=Contacts.empty(),
+    )
     return encode_bodies(rec)
 
 
@@ -185,7 +195,14 @@ def contacts_with(data: bytes, change) -> bytes:
     fields = {k: np.array(v) for k, v in d.items() if isinstance(v, np.ndarray)}
     change(fields)
     d.update(fields)
-    rec = StepRecord(step=d["step"], time=d["time"], position=np.zeros((0, 2)),
-                     angle=np.zeros(0), velocity=np.zeros((0, 2)), angular_velocity=np.zeros(0),
-                     exists=np.zeros(0, bool), contacts=contacts_from_message(d))
+    rec = StepRecord(
+        step=d["step"],
+        time=d["time"],
+        position=np.zeros((0, 2)),
+        angle=np.zeros(0),
+        velocity=np.zeros((0, 2)),
+        angular_velocity=np.zeros(0),
+        exists=np.zeros(0, bool),
+        contacts=contacts_from_message(d),
+    )
     return encode_contacts(rec)

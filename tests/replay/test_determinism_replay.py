@@ -27,15 +27,22 @@ def test_recording_does_not_change_the_physics(tmp_path):
         recorded = record(path, scene, steps=steps)
         assert recorded == run_hashes(scene, steps=steps)
         # and the log's /stats carry the same hashes, step by step
-        logged = [S.decode("Stats", raw.messages["/stats"])["state_hash"]
-                  for raw in RawLog(str(path)).steps()]
+        logged = [
+            S.decode("Stats", raw.messages["/stats"])["state_hash"]
+            for raw in RawLog(str(path)).steps()
+        ]
         assert logged == recorded
 
 
 def _isaac_run(scene: Path, out: Path, seed: str) -> None:
     env = {**os.environ, "PYTHONHASHSEED": seed}
-    subprocess.run([PYTHON, "-m", "isaac", "run", str(scene), "--mcap", str(out), "--quiet"],
-                   check=True, cwd=REPO, env=env, capture_output=True)
+    subprocess.run(
+        [PYTHON, "-m", "isaac", "run", str(scene), "--mcap", str(out), "--quiet"],
+        check=True,
+        cwd=REPO,
+        env=env,
+        capture_output=True,
+    )
 
 
 def test_runs_with_different_hash_seeds_write_identical_logs(tmp_path):
@@ -68,8 +75,14 @@ def _hashes(disable_jit: bool) -> dict:
     env.pop("NUMBA_DISABLE_JIT", None)
     if disable_jit:
         env["NUMBA_DISABLE_JIT"] = "1"
-    proc = subprocess.run([PYTHON, "-c", _HASHES_SCRIPT, json.dumps(_JIT_CASES)], check=True,
-                          cwd=REPO, env=env, capture_output=True, text=True)
+    proc = subprocess.run(
+        [PYTHON, "-c", _HASHES_SCRIPT, json.dumps(_JIT_CASES)],
+        check=True,
+        cwd=REPO,
+        env=env,
+        capture_output=True,
+        text=True,
+    )
     return json.loads(proc.stdout)
 
 
@@ -115,9 +128,14 @@ def test_golden_hash_of_the_inline_stack_after_120_steps():
 def test_the_shipped_pile_replays_identically_end_to_end(tmp_path):
     """`isaac run scenes/pile.yaml --mcap` then `isaac replay`: 1,200 steps of 503 bodies."""
     log = tmp_path / "pile.mcap"
-    subprocess.run([PYTHON, "-m", "isaac", "run", "scenes/pile.yaml", "--mcap", str(log),
-                    "--quiet"], check=True, cwd=REPO, capture_output=True)
-    proc = subprocess.run([PYTHON, "-m", "isaac", "replay", str(log)], cwd=REPO,
-                          capture_output=True, text=True)
+    subprocess.run(
+        [PYTHON, "-m", "isaac", "run", "scenes/pile.yaml", "--mcap", str(log), "--quiet"],
+        check=True,
+        cwd=REPO,
+        capture_output=True,
+    )
+    proc = subprocess.run(
+        [PYTHON, "-m", "isaac", "replay", str(log)], cwd=REPO, capture_output=True, text=True
+    )
     assert proc.returncode == 0, proc.stdout + proc.stderr
     assert proc.stdout.startswith("identical: replayed 1201 steps (steps 0..1200)")

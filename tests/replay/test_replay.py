@@ -12,15 +12,23 @@ import pytest
 
 from isaac.app.cli import main
 from isaac.engine.diagnostics import state_hash
-from isaac.errors import LogError, SceneError
 from isaac.engine.simulation import Simulation
+from isaac.errors import LogError, SceneError
 from recorder import Recorder
 from replay.compare import diff_logs, replay_log, ulp_distance, ulp_distances
 from replay.reader import RawLog
 
 sys.path.insert(0, str(Path(__file__).parent))
-from logtools import (COMINGS_AND_GOINGS, SMALL_PILE, STACK, bodies_with,  # noqa: E402
-                      contacts_with, record, rewrite, scene_from)
+from logtools import (
+    COMINGS_AND_GOINGS,
+    SMALL_PILE,
+    STACK,
+    bodies_with,  # noqa: E402
+    contacts_with,
+    record,
+    rewrite,
+    scene_from,
+)
 
 
 def isaac(capsys, *argv) -> tuple[int, str, str]:
@@ -37,6 +45,7 @@ def stack_log(tmp_path_factory) -> Path:
 
 
 # --- ULP distance ----------------------------------------------------------------------------
+
 
 def test_ulp_distance_counts_representable_doubles_between_two_values():
     x = 1.2345
@@ -62,14 +71,18 @@ def test_vectorised_ulp_distances_agree_with_the_scalar_one():
 
 # --- clean runs ------------------------------------------------------------------------------
 
-@pytest.mark.parametrize("scene, steps", [
-    (STACK, None),
-    (COMINGS_AND_GOINGS, None),   # bodies enter and leave: /world is logged 3 more times
-    (SMALL_PILE, None),
-    ("pile", 40),                 # the 500-body pile, first 40 steps
-    ("spawn", 330),               # bodies enter at 0.5, 1.0, 1.5 s and one leaves at 2.5 s
-    ("head_on", None),
-])
+
+@pytest.mark.parametrize(
+    "scene, steps",
+    [
+        (STACK, None),
+        (COMINGS_AND_GOINGS, None),  # bodies enter and leave: /world is logged 3 more times
+        (SMALL_PILE, None),
+        ("pile", 40),  # the 500-body pile, first 40 steps
+        ("spawn", 330),  # bodies enter at 0.5, 1.0, 1.5 s and one leaves at 2.5 s
+        ("head_on", None),
+    ],
+)
 def test_a_clean_log_replays_identically(tmp_path, capsys, scene, steps):
     path = tmp_path / "run.mcap"
     hashes = record(path, scene, steps=steps)
@@ -108,8 +121,10 @@ def test_from_step_past_the_end_is_a_bad_request(stack_log, capsys):
 
 # --- divergences -----------------------------------------------------------------------------
 
+
 def test_one_ulp_in_one_body_at_step_k_is_reported_at_k_that_body_that_field(
-        stack_log, tmp_path, capsys):
+    stack_log, tmp_path, capsys
+):
     k, body = 37, 2  # "high"
     original = {}
 
@@ -119,8 +134,13 @@ def test_one_ulp_in_one_body_at_step_k_is_reported_at_k_that_body_that_field(
         v[2 * body + 1] = np.nextafter(v[2 * body + 1], np.inf)
 
     bad = tmp_path / "bad.mcap"
-    rewrite(stack_log, bad, message=lambda topic, step, data: (
-        bodies_with(data, bump) if topic == "/bodies" and step == k else data))
+    rewrite(
+        stack_log,
+        bad,
+        message=lambda topic, step, data: (
+            bodies_with(data, bump) if topic == "/bodies" and step == k else data
+        ),
+    )
     out_json = tmp_path / "report.json"
     status, out, err = isaac(capsys, "replay", bad, "--json", out_json)
     assert status == 1, out + err
@@ -129,8 +149,13 @@ def test_one_ulp_in_one_body_at_step_k_is_reported_at_k_that_body_that_field(
     assert "1 ULP" in out
     report = json.loads(out_json.read_text())
     first = report["divergences"][0]
-    assert (first["step"], first["channel"], first["body"], first["body_name"], first["field"]) \
-        == (k, "/bodies", body, "high", "velocity.y")
+    assert (first["step"], first["channel"], first["body"], first["body_name"], first["field"]) == (
+        k,
+        "/bodies",
+        body,
+        "high",
+        "velocity.y",
+    )
     assert first["ulps"] == 1 and first["differing_values"] == 1
     assert first["replayed"] == original["value"]
     assert first["logged"] == float(np.nextafter(original["value"], np.inf))
@@ -148,8 +173,13 @@ def test_all_lists_every_differing_step(stack_log, tmp_path, capsys):
         arrays["angle"][1] = np.nextafter(arrays["angle"][1], -np.inf)
 
     bad = tmp_path / "bad.mcap"
-    rewrite(stack_log, bad, message=lambda topic, step, data: (
-        bodies_with(data, bump) if topic == "/bodies" and step in changed else data))
+    rewrite(
+        stack_log,
+        bad,
+        message=lambda topic, step, data: (
+            bodies_with(data, bump) if topic == "/bodies" and step in changed else data
+        ),
+    )
     report = replay_log(str(bad), all_steps=True)
     steps = report.divergent_steps()
     # each changed step differs; the step after it does not follow from the changed state
@@ -169,8 +199,13 @@ def test_one_ulp_in_a_contact_impulse_names_the_contact_row(stack_log, tmp_path)
     def bump(fields):
         fields["impulse"][1] = np.nextafter(fields["impulse"][1], np.inf)
 
-    rewrite(stack_log, bad, message=lambda topic, step, data: (
-        contacts_with(data, bump) if topic == "/contacts" and step == k else data))
+    rewrite(
+        stack_log,
+        bad,
+        message=lambda topic, step, data: (
+            contacts_with(data, bump) if topic == "/contacts" and step == k else data
+        ),
+    )
     report = replay_log(str(bad))
     d = report.divergences[0]
     assert (d.step, d.channel, d.field, d.ulps) == (k, "/contacts", "impulse", 1)
@@ -186,8 +221,13 @@ def test_a_missing_contact_row_is_a_count_mismatch_not_a_crash(stack_log, tmp_pa
         for name, arr in fields.items():
             fields[name] = arr[: (m - 1) * (arr.size // m)]
 
-    rewrite(stack_log, bad, message=lambda topic, step, data: (
-        contacts_with(data, drop_last) if topic == "/contacts" and step == k else data))
+    rewrite(
+        stack_log,
+        bad,
+        message=lambda topic, step, data: (
+            contacts_with(data, drop_last) if topic == "/contacts" and step == k else data
+        ),
+    )
     status, out, _ = isaac(capsys, "replay", bad)
     assert status == 1
     assert f"step {k}, /contacts" in out and "contacts count differs" in out
@@ -205,8 +245,13 @@ def test_a_log_with_different_bodies_reports_a_count_mismatch(stack_log, tmp_pat
         for name in arrays:
             arrays[name] = arrays[name][: arrays[name].size * 3 // 4]
 
-    rewrite(stack_log, a, message=lambda topic, step, data: (
-        bodies_with(data, drop_last) if topic == "/bodies" and step == 5 else data))
+    rewrite(
+        stack_log,
+        a,
+        message=lambda topic, step, data: (
+            bodies_with(data, drop_last) if topic == "/bodies" and step == 5 else data
+        ),
+    )
     status, out, _ = isaac(capsys, "replay", a)
     assert status == 1
     assert "step 5, /bodies: bodies count differs: logged 3, replayed 4" in out
@@ -217,8 +262,11 @@ def test_a_dropped_world_message_is_reported_where_the_body_set_changes(tmp_path
     record(log, COMINGS_AND_GOINGS)
     worlds = [raw.step for raw in RawLog(str(log)).steps() if "/world" in raw.messages]
     assert worlds == [0, 30, 60, 100]  # start; enters at 0.3 s and 0.6 s; leaves at 1.0 s
-    rewrite(log, bad, message=lambda topic, step, data: (
-        None if topic == "/world" and step == 60 else data))
+    rewrite(
+        log,
+        bad,
+        message=lambda topic, step, data: None if topic == "/world" and step == 60 else data,
+    )
     report = replay_log(str(bad))
     d = report.divergences[0]
     assert (d.step, d.channel, d.kind) == (60, "/world", "missing")
@@ -226,6 +274,7 @@ def test_a_dropped_world_message_is_reported_where_the_body_set_changes(tmp_path
 
 
 # --- bad files -------------------------------------------------------------------------------
+
 
 def test_an_empty_file_is_a_one_line_error(tmp_path, capsys):
     empty = tmp_path / "empty.mcap"
@@ -260,7 +309,7 @@ def test_a_corrupt_header_is_a_one_line_error(stack_log, tmp_path, capsys, where
     else:
         data = bytearray(stack_log.read_bytes())
         start = 9 if where == "header" else data.index(b"isaac-log")
-        data[start:start + 12] = b"\xff" * 12
+        data[start : start + 12] = b"\xff" * 12
         bad.write_bytes(bytes(data))
         expected = "not an ISAAC log"
     status, out, err = isaac(capsys, "replay", bad)
@@ -280,8 +329,12 @@ def test_an_embedded_scene_that_fails_validation_exits_2(stack_log, tmp_path, ca
 
 def test_an_embedded_scene_altered_behind_its_hash_exits_2(stack_log, tmp_path, capsys):
     bad = tmp_path / "bad.mcap"
-    rewrite(stack_log, bad, scene=lambda text: text.replace("restitution: 0.3", "restitution: 0.4"),
-            fix_scene_hash=False)
+    rewrite(
+        stack_log,
+        bad,
+        scene=lambda text: text.replace("restitution: 0.3", "restitution: 0.4"),
+        fix_scene_hash=False,
+    )
     status, _, err = isaac(capsys, "replay", bad)
     assert status == 2 and "does not match its recorded sha256" in err
     with pytest.raises(LogError):
@@ -347,17 +400,24 @@ def test_a_corrupt_chunk_in_a_closed_log_is_reported_as_damage(tmp_path):
 
 # --- tolerance and versions ------------------------------------------------------------------
 
+
 def test_tolerance_accepts_small_differences_and_reports_large_ones(stack_log, tmp_path, capsys):
     small, large = tmp_path / "small.mcap", tmp_path / "large.mcap"
 
     def nudge(factor):
         def change(arrays):
             arrays["position"][3] *= factor  # body "low", y ~ 0.5 m
+
         return change
 
     for path, factor in ((small, 1 + 1e-13), (large, 1 + 1e-6)):
-        rewrite(stack_log, path, message=lambda topic, step, data, f=factor: (
-            bodies_with(data, nudge(f)) if topic == "/bodies" and step in (30, 31) else data))
+        rewrite(
+            stack_log,
+            path,
+            message=lambda topic, step, data, f=factor: (
+                bodies_with(data, nudge(f)) if topic == "/bodies" and step in (30, 31) else data
+            ),
+        )
     assert isaac(capsys, "replay", small)[0] == 1
     status, out, _ = isaac(capsys, "replay", small, "--tolerance", "1e-9")
     assert status == 0 and out.startswith("equal within tolerance 1e-09: replayed 121 steps")
@@ -368,14 +428,18 @@ def test_tolerance_accepts_small_differences_and_reports_large_ones(stack_log, t
 
 def test_a_log_from_other_versions_says_so_and_suggests_tolerance(stack_log, tmp_path, capsys):
     other = tmp_path / "other.mcap"
-    rewrite(stack_log, other, metadata=lambda m: {**m, "numpy_version": "1.24.0",
-                                                  "cpu": "Some Other CPU"})
+    rewrite(
+        stack_log,
+        other,
+        metadata=lambda m: {**m, "numpy_version": "1.24.0", "cpu": "Some Other CPU"},
+    )
     status, out, _ = isaac(capsys, "replay", other)
     assert status == 0
     assert "numpy 1.24.0 in the log" in out and "--tolerance" in out
 
 
 # --- diff ------------------------------------------------------------------------------------
+
 
 def test_diff_of_two_runs_of_one_scene_is_identical(stack_log, tmp_path, capsys):
     again = tmp_path / "again.mcap"
@@ -394,8 +458,12 @@ def test_diff_reports_the_first_step_where_two_logs_part(stack_log, tmp_path, ca
     assert "the two logs embed different scenes" in report["notes"]
     # the scenes differ in one body's restitution: /world says so at step 0
     first = report["divergences"][0]
-    assert (first["step"], first["channel"], first["body_name"], first["field"]) == \
-        (0, "/world", "falling", "restitution")
+    assert (first["step"], first["channel"], first["body_name"], first["field"]) == (
+        0,
+        "/world",
+        "falling",
+        "restitution",
+    )
     assert (first["logged"], first["replayed"]) == (0.3, 0.35)
     # and the motion parts later, when the falling body bounces
     later = diff_logs(str(stack_log), str(other), all_steps=True)
@@ -464,8 +532,11 @@ def test_the_replay_encoder_writes_the_reference_encoders_bytes(scene):
     encoder = StepEncoder(sim.model, gravity)
 
     def reference(r):
-        return {"/bodies": encode_bodies(r), "/contacts": encode_contacts(r),
-                "/stats": encode_stats(r.step, r.time, compute_stats(sim.model, gravity, r))}
+        return {
+            "/bodies": encode_bodies(r),
+            "/contacts": encode_contacts(r),
+            "/stats": encode_stats(r.step, r.time, compute_stats(sim.model, gravity, r)),
+        }
 
     records = [sim.record()] + [sim.step() for _ in range(40)]
     assert any(len(r.contacts) for r in records) and not len(records[0].contacts)

@@ -10,8 +10,13 @@ RULE_MIN = 1
 RULE_MEAN = 2
 RULE_PRODUCT = 3
 RULE_SQRT = 4  # geometric mean (friction's default)
-RULE_CODES = {"max": RULE_MAX, "min": RULE_MIN, "mean": RULE_MEAN, "product": RULE_PRODUCT,
-              "sqrt": RULE_SQRT}
+RULE_CODES = {
+    "max": RULE_MAX,
+    "min": RULE_MIN,
+    "mean": RULE_MEAN,
+    "product": RULE_PRODUCT,
+    "sqrt": RULE_SQRT,
+}
 
 
 @numba.njit(cache=True, nogil=True)

@@ -6,10 +6,40 @@ from __future__ import annotations
 import numba
 
 from isaac.engine.solver.schedule import (
-    G12, GM11, GM12, GM22, GROUP_WIDTH, IIA, IIB, IMA, IMB, LANES, ROW2, R_JN, R_JT, R_K, R_MT,
-    R_MU, R_NX, R_NY, R_RNA, R_RNB, R_RTA, R_RTB, R_TG, UNIT_BLOCK, U_2LANES, U_LANES, VAX, VAY,
-    VBX, VBY, WA, WB,
+    G12,
+    GM11,
+    GM12,
+    GM22,
+    GROUP_WIDTH,
+    IIA,
+    IIB,
+    IMA,
+    IMB,
+    LANES,
+    R_JN,
+    R_JT,
+    R_K,
+    R_MT,
+    R_MU,
+    R_NX,
+    R_NY,
+    R_RNA,
+    R_RNB,
+    R_RTA,
+    R_RTB,
+    R_TG,
+    ROW2,
+    U_2LANES,
+    U_LANES,
+    UNIT_BLOCK,
+    VAX,
+    VAY,
+    VBX,
+    VBY,
+    WA,
+    WB,
 )
+
 
 @numba.njit(cache=True, nogil=True, error_model="numpy")
 def run_passes(t, kind, successor, groups, iterations):

@@ -12,9 +12,34 @@ from isaac.engine.solver.mixing import combine
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
-def row_terms(nx, ny, px, py, xa, ya, xb, yb, ima, iia, imb, iib, vax, vay, wa, vbx, vby, wb,
-               depth, restitution_a, restitution_b, gdx, gdy, restitution_rule,
-               restitution_threshold, h):
+def row_terms(
+    nx,
+    ny,
+    px,
+    py,
+    xa,
+    ya,
+    xb,
+    yb,
+    ima,
+    iia,
+    imb,
+    iib,
+    vax,
+    vay,
+    wa,
+    vbx,
+    vby,
+    wb,
+    depth,
+    restitution_a,
+    restitution_b,
+    gdx,
+    gdy,
+    restitution_rule,
+    restitution_threshold,
+    h,
+):
     """What the solver needs of one row: lever arms, k along the normal, k and 1/k along the
     tangent, target normal velocity, restitution used and the bounce-back distance (m; 0 unless
     a speculative row bounces)."""
@@ -55,8 +80,20 @@ def row_terms(nx, ny, px, py, xa, ya, xb, yb, ima, iia, imb, iib, vax, vay, wa, 
 
 
 @numba.njit(cache=True, nogil=True)
-def apply_bounce_back(rows, c_a, c_b, c_feature, c_slot, c_point, c_normal, bounce_back, inv,
-                 position, c_push_a, c_push_b):
+def apply_bounce_back(
+    rows,
+    c_a,
+    c_b,
+    c_feature,
+    c_slot,
+    c_point,
+    c_normal,
+    bounce_back,
+    inv,
+    position,
+    c_push_a,
+    c_push_b,
+):
     """Move each pair whose speculative contact bounced by its smallest bounce-back distance
     along the normal (a towards b, shared by inverse mass), recorded on its slot-0 row."""
     k = 0

@@ -38,10 +38,12 @@ UNIT_POINT = 1  # a single point
 # r x t of a and b, 1 / k along the tangent, r x n of a and b, target normal velocity,
 # accumulated normal and tangent impulses, and R_K: k along the normal (a block) or 1 / k (a
 # point); then per unit: inverse masses and inertias, a block's K12 and K^-1, the velocities.
-(R_NX, R_NY, R_MU, R_RTA, R_RTB, R_MT, R_RNA, R_RNB, R_TG, R_JN, R_JT, R_K,
- ROW2) = (c * LANES for c in range(13))
-(IMA, IIA, IMB, IIB, G12, GM11, GM12, GM22, VAX, VAY, WA, VBX, VBY,
- WB) = (c * LANES for c in range(24, 38))
+(R_NX, R_NY, R_MU, R_RTA, R_RTB, R_MT, R_RNA, R_RNB, R_TG, R_JN, R_JT, R_K, ROW2) = (
+    c * LANES for c in range(13)
+)
+(IMA, IIA, IMB, IIB, G12, GM11, GM12, GM22, VAX, VAY, WA, VBX, VBY, WB) = (
+    c * LANES for c in range(24, 38)
+)
 GROUP_COLUMNS = 38
 GROUP_WIDTH = GROUP_COLUMNS * LANES
 U_LANES = np.uint64(LANES)
@@ -96,8 +98,7 @@ def schedule(rows, c_a, c_b, c_slot, c_point, c_normal, position, inv, n):
             ny = c_normal[q, 1]
             rna2 = (c_point[q, 0] - position[a2, 0]) * ny - (c_point[q, 1] - position[a2, 1]) * nx
             rnb2 = (c_point[q, 0] - position[b2, 0]) * ny - (c_point[q, 1] - position[b2, 1]) * nx
-            k22 = (inv[a2, 0] + inv[b2, 0] + rna2 * rna2 * inv[a2, 1]
-                   + rnb2 * rnb2 * inv[b2, 1])
+            k22 = inv[a2, 0] + inv[b2, 0] + rna2 * rna2 * inv[a2, 1] + rnb2 * rnb2 * inv[b2, 1]
             k12 = inv[a, 0] + inv[b, 0] + rna1 * rna2 * inv[a, 1] + rnb1 * rnb2 * inv[b, 1]
             det = k11 * k22 - k12 * k12
             if k11 * k11 < MAX_CONDITION * det:

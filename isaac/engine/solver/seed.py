@@ -15,10 +15,34 @@ COLUMNS = 12
 
 
 @numba.njit(cache=True, nogil=True)
-def solve_seed(rows, c_a, c_b, c_feature, c_slot, c_point, c_normal, c_depth, position,
-                velocity, angular_velocity, inv_mass, inv_inertia, gravity_dv, restitution,
-                friction, restitution_rule, friction_rule, restitution_threshold, friction_on, h,
-                c_impulse, c_tangent, c_restitution, c_push_a, c_push_b):
+def solve_seed(
+    rows,
+    c_a,
+    c_b,
+    c_feature,
+    c_slot,
+    c_point,
+    c_normal,
+    c_depth,
+    position,
+    velocity,
+    angular_velocity,
+    inv_mass,
+    inv_inertia,
+    gravity_dv,
+    restitution,
+    friction,
+    restitution_rule,
+    friction_rule,
+    restitution_threshold,
+    friction_on,
+    h,
+    c_impulse,
+    c_tangent,
+    c_restitution,
+    c_push_a,
+    c_push_b,
+):
     """solve_contacts with the seed's solver (_seed_pass)."""
     n = velocity.shape[0]
     v = np.empty((n, 3))  # the velocities (vx, vy, w) and inverse masses, packed per body
@@ -37,11 +61,33 @@ def solve_seed(rows, c_a, c_b, c_feature, c_slot, c_point, c_normal, c_depth, po
         nx = c_normal[k, 0]
         ny = c_normal[k, 1]
         rna, rnb, rta, rtb, kn, kt, mt, target, e, bounce = row_terms(
-            nx, ny, c_point[k, 0], c_point[k, 1], position[a, 0], position[a, 1],
-            position[b, 0], position[b, 1], inv[a, 0], inv[a, 1], inv[b, 0], inv[b, 1],
-            v[a, 0], v[a, 1], v[a, 2], v[b, 0], v[b, 1], v[b, 2], c_depth[k],
-            restitution[a], restitution[b], gravity_dv[0], gravity_dv[1], restitution_rule,
-            restitution_threshold, h)
+            nx,
+            ny,
+            c_point[k, 0],
+            c_point[k, 1],
+            position[a, 0],
+            position[a, 1],
+            position[b, 0],
+            position[b, 1],
+            inv[a, 0],
+            inv[a, 1],
+            inv[b, 0],
+            inv[b, 1],
+            v[a, 0],
+            v[a, 1],
+            v[a, 2],
+            v[b, 0],
+            v[b, 1],
+            v[b, 2],
+            c_depth[k],
+            restitution[a],
+            restitution[b],
+            gravity_dv[0],
+            gravity_dv[1],
+            restitution_rule,
+            restitution_threshold,
+            h,
+        )
         rc[k, NX] = nx
         rc[k, NY] = ny
         rc[k, RNA] = rna
@@ -63,8 +109,21 @@ def solve_seed(rows, c_a, c_b, c_feature, c_slot, c_point, c_normal, c_depth, po
         velocity[i, 0] = v[i, 0]
         velocity[i, 1] = v[i, 1]
         angular_velocity[i] = v[i, 2]
-    apply_bounce_back(rows, c_a, c_b, c_feature, c_slot, c_point, c_normal, bounce_back, inv,
-                 position, c_push_a, c_push_b)
+    apply_bounce_back(
+        rows,
+        c_a,
+        c_b,
+        c_feature,
+        c_slot,
+        c_point,
+        c_normal,
+        bounce_back,
+        inv,
+        position,
+        c_push_a,
+        c_push_b,
+    )
+
 
 @numba.njit(cache=True, nogil=True, inline="always")
 def _apply(a, b, k, jn, jt, rc, inv, v):
@@ -89,8 +148,12 @@ def _seed_pass(rows, c_a, c_b, c_depth, rc, inv, v, c_restitution, c_impulse, c_
             continue
         a = c_a[k]
         b = c_b[k]
-        vn = ((v[b, 0] - v[a, 0]) * rc[k, NX] + (v[b, 1] - v[a, 1]) * rc[k, NY]
-              + v[b, 2] * rc[k, RNB] - v[a, 2] * rc[k, RNA])
+        vn = (
+            (v[b, 0] - v[a, 0]) * rc[k, NX]
+            + (v[b, 1] - v[a, 1]) * rc[k, NY]
+            + v[b, 2] * rc[k, RNB]
+            - v[a, 2] * rc[k, RNA]
+        )
         if c_depth[k] >= 0.0:
             if vn >= 0.0:
                 continue  # not approaching: the seed applies nothing
@@ -102,8 +165,12 @@ def _seed_pass(rows, c_a, c_b, c_depth, rc, inv, v, c_restitution, c_impulse, c_
         _apply(a, b, k, j, 0.0, rc, inv, v)
         c_impulse[k] = j
         if rc[k, MU] > 0.0 and rc[k, KT] > 0.0:
-            vt = (-(v[b, 0] - v[a, 0]) * rc[k, NY] + (v[b, 1] - v[a, 1]) * rc[k, NX]
-                  + v[b, 2] * rc[k, RTB] - v[a, 2] * rc[k, RTA])
+            vt = (
+                -(v[b, 0] - v[a, 0]) * rc[k, NY]
+                + (v[b, 1] - v[a, 1]) * rc[k, NX]
+                + v[b, 2] * rc[k, RTB]
+                - v[a, 2] * rc[k, RTA]
+            )
             limit = rc[k, MU] * j
             jt = min(max(-vt / rc[k, KT], -limit), limit)
             _apply(a, b, k, 0.0, jt, rc, inv, v)

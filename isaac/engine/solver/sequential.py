@@ -10,17 +10,66 @@ from isaac.engine.solver.mixing import combine
 from isaac.engine.solver.passes import run_passes
 from isaac.engine.solver.rows import apply_bounce_back, row_terms
 from isaac.engine.solver.schedule import (
-    G12, GM11, GM12, GM22, GROUP_WIDTH, LANES, ROW2, R_JN, R_JT, R_K, R_MT, R_MU, R_NX, R_NY, R_RNA,
-    R_RNB, R_RTA, R_RTB, R_TG, UNIT_BLOCK, layout_table, schedule,
+    G12,
+    GM11,
+    GM12,
+    GM22,
+    GROUP_WIDTH,
+    LANES,
+    R_JN,
+    R_JT,
+    R_K,
+    R_MT,
+    R_MU,
+    R_NX,
+    R_NY,
+    R_RNA,
+    R_RNB,
+    R_RTA,
+    R_RTB,
+    R_TG,
+    ROW2,
+    UNIT_BLOCK,
+    layout_table,
+    schedule,
 )
 
+
 @numba.njit(cache=True, nogil=True)
-def solve_sequential(rows, c_a, c_b, c_feature, c_slot, c_point, c_normal, c_depth,
-                      c_previous, position, velocity, angular_velocity, inv_mass, inv_inertia,
-                      gravity_dv, restitution, friction, restitution_rule, friction_rule,
-                      restitution_threshold, friction_on, iterations, warm_starting, h,
-                      prev_impulse, prev_tangent, c_impulse, c_tangent, c_restitution, c_push_a,
-                      c_push_b, table):
+def solve_sequential(
+    rows,
+    c_a,
+    c_b,
+    c_feature,
+    c_slot,
+    c_point,
+    c_normal,
+    c_depth,
+    c_previous,
+    position,
+    velocity,
+    angular_velocity,
+    inv_mass,
+    inv_inertia,
+    gravity_dv,
+    restitution,
+    friction,
+    restitution_rule,
+    friction_rule,
+    restitution_threshold,
+    friction_on,
+    iterations,
+    warm_starting,
+    h,
+    prev_impulse,
+    prev_tangent,
+    c_impulse,
+    c_tangent,
+    c_restitution,
+    c_push_a,
+    c_push_b,
+    table,
+):
     """solve_contacts with the sequential solver: accumulated, clamped impulses, warm started,
     `iterations` Gauss-Seidel passes over every unit.
 
@@ -39,18 +88,42 @@ def solve_sequential(rows, c_a, c_b, c_feature, c_slot, c_point, c_normal, c_dep
         v[i, 2] = angular_velocity[i]
         inv[i, 0] = inv_mass[i]
         inv[i, 1] = inv_inertia[i]
-    kind, lane_row, block = schedule(rows, c_a, c_b, c_slot, c_point, c_normal, position,
-                                      inv, n)
+    kind, lane_row, block = schedule(rows, c_a, c_b, c_slot, c_point, c_normal, position, inv, n)
     groups = kind.shape[0]
     if table.shape[0] < groups * GROUP_WIDTH + 3 * LANES:
         table = np.empty(2 * (groups * GROUP_WIDTH + 3 * LANES))
-    where, successor, first, fixed, fixed_body = layout_table(table, kind, lane_row, rows, c_a, c_b,
-                                                         inv)
+    where, successor, first, fixed, fixed_body = layout_table(
+        table, kind, lane_row, rows, c_a, c_b, inv
+    )
     bounce_back = np.zeros(rows)  # (1 + e u_b / u) g of speculative rows that bounce (m)
-    warm = fill_rows(table, where, block, rows, c_a, c_b, c_point, c_normal, c_depth,
-                      c_previous, position, v, inv, gravity_dv, restitution, friction,
-                      restitution_rule, friction_rule, restitution_threshold, friction_on,
-                      warm_starting, h, prev_impulse, prev_tangent, c_restitution, bounce_back)
+    warm = fill_rows(
+        table,
+        where,
+        block,
+        rows,
+        c_a,
+        c_b,
+        c_point,
+        c_normal,
+        c_depth,
+        c_previous,
+        position,
+        v,
+        inv,
+        gravity_dv,
+        restitution,
+        friction,
+        restitution_rule,
+        friction_rule,
+        restitution_threshold,
+        friction_on,
+        warm_starting,
+        h,
+        prev_impulse,
+        prev_tangent,
+        c_restitution,
+        bounce_back,
+    )
     t = table
     if warm_starting:
         # applied in row order: -P to a, +P to b
@@ -106,16 +179,52 @@ def solve_sequential(rows, c_a, c_b, c_feature, c_slot, c_point, c_normal, c_dep
         velocity[i, 0] = v[i, 0]
         velocity[i, 1] = v[i, 1]
         angular_velocity[i] = v[i, 2]
-    apply_bounce_back(rows, c_a, c_b, c_feature, c_slot, c_point, c_normal, bounce_back, inv,
-                 position, c_push_a, c_push_b)
+    apply_bounce_back(
+        rows,
+        c_a,
+        c_b,
+        c_feature,
+        c_slot,
+        c_point,
+        c_normal,
+        bounce_back,
+        inv,
+        position,
+        c_push_a,
+        c_push_b,
+    )
     return table
 
 
 @numba.njit(cache=True, nogil=True)
-def fill_rows(t, where, block, rows, c_a, c_b, c_point, c_normal, c_depth, c_previous,
-               position, v, inv, gravity_dv, restitution, friction, restitution_rule,
-               friction_rule, restitution_threshold, friction_on, warm_starting, h,
-               prev_impulse, prev_tangent, c_restitution, bounce_back):
+def fill_rows(
+    t,
+    where,
+    block,
+    rows,
+    c_a,
+    c_b,
+    c_point,
+    c_normal,
+    c_depth,
+    c_previous,
+    position,
+    v,
+    inv,
+    gravity_dv,
+    restitution,
+    friction,
+    restitution_rule,
+    friction_rule,
+    restitution_threshold,
+    friction_on,
+    warm_starting,
+    h,
+    prev_impulse,
+    prev_tangent,
+    c_restitution,
+    bounce_back,
+):
     """Each row's terms into its table columns, in row order, with a block's K12 and K^-1;
     the restitution used and the bounce-back distances; and the warm-start impulse (last
     step's accumulated impulses of the same contact point) as it will be applied: returns
@@ -133,11 +242,33 @@ def fill_rows(t, where, block, rows, c_a, c_b, c_point, c_normal, c_depth, c_pre
         nx = c_normal[k, 0]
         ny = c_normal[k, 1]
         rna, rnb, rta, rtb, kn, kt, mt, target, e, bounce = row_terms(
-            nx, ny, c_point[k, 0], c_point[k, 1], position[a, 0], position[a, 1],
-            position[b, 0], position[b, 1], inv[a, 0], inv[a, 1], inv[b, 0], inv[b, 1],
-            v[a, 0], v[a, 1], v[a, 2], v[b, 0], v[b, 1], v[b, 2], c_depth[k],
-            restitution[a], restitution[b], gravity_dv[0], gravity_dv[1], restitution_rule,
-            restitution_threshold, h)
+            nx,
+            ny,
+            c_point[k, 0],
+            c_point[k, 1],
+            position[a, 0],
+            position[a, 1],
+            position[b, 0],
+            position[b, 1],
+            inv[a, 0],
+            inv[a, 1],
+            inv[b, 0],
+            inv[b, 1],
+            v[a, 0],
+            v[a, 1],
+            v[a, 2],
+            v[b, 0],
+            v[b, 1],
+            v[b, 2],
+            c_depth[k],
+            restitution[a],
+            restitution[b],
+            gravity_dv[0],
+            gravity_dv[1],
+            restitution_rule,
+            restitution_threshold,
+            h,
+        )
         if a != mu_a or b != mu_b:  # (consecutive rows are often one pair's)
             mu = combine(friction_rule, friction[a], friction[b]) if friction_on else 0.0
             mu_a = a
