@@ -142,7 +142,7 @@ def _stat_sums(
 def _write_head(words, ints, base, step, time, n, m, sums):
     """The head both frames start with, from word ``base`` of ``words`` / ``ints`` (float64 and
     int64 views of one buffer): step, time (s), n, m, then the nine /stats values in
-    writer_process.STAT_KEYS order (`_stat_sums`' and their derived ones)."""
+    frames.STAT_KEYS order (`_stat_sums`' and their derived ones)."""
     ke, pe, px, py, ang, max_depth, max_impulse = sums
     ints[base] = step
     words[base + 1] = time
@@ -288,7 +288,7 @@ def _put_values(buf, at, src):
         _copy_bytes(buf, at, np.ascontiguousarray(src))
 
 
-HEAD_BYTES = 120  # writer_process._HEAD: step, time, n, m, 9 stats, 2 message lengths
+HEAD_BYTES = 120  # frames.FRAME_HEAD: step, time, n, m, 9 stats, 2 message lengths
 
 
 @numba.njit(cache=True, nogil=True)
@@ -325,7 +325,7 @@ def pack_frame(
     gy,
 ):
     """A whole MCAP frame at byte ``pos`` (a multiple of 8) of ``buf`` (uint8): the head
-    (writer_process._HEAD, native = little-endian: step, time s, n, m, the nine /stats values,
+    (frames.FRAME_HEAD, native = little-endian: step, time s, n, m, the nine /stats values,
     the two messages' lengths), the Bodies message at ``pos + HEAD_BYTES`` and the Contacts
     message ``contacts_at`` bytes after it, in one call (`pack_layout`, then each field's values
     by memcpy). The int arrays must be int32, ``exists`` bool.
@@ -392,7 +392,7 @@ def pack_frame(
 # depths...) and decoded protobuf cost it a quarter of its time, so its frame is raw
 # native-endian arrays (both ends run on one machine), each at an 8-byte boundary, in units of
 # 8-byte words: the head (RERUN_HEAD words: step int64, time float64 s, n int64, m int64, the
-# nine `/stats` values as float64 in writer_process.STAT_KEYS order), then position (n, 2) m,
+# nine `/stats` values as float64 in frames.STAT_KEYS order), then position (n, 2) m,
 # angle (n,) rad, exists (n,) one byte each, point (m, 2) m, normal (m, 2), impulse (m,) N s,
 # push_a (m, 2) m, push_b (m, 2) m.
 RERUN_HEAD = 13

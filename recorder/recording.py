@@ -111,7 +111,8 @@ class Recorder:
                 "impulse_scale": auto_impulse if impulse_scale is None else impulse_scale,
             }
         if offload == "process":
-            from recorder.writer_process import WriterProcess, model_table
+            from recorder.frames import model_table
+            from recorder.writer_process import WriterProcess
 
             return WriterProcess(
                 "mcap",
@@ -146,7 +147,8 @@ class Recorder:
 
     def _rerun_writer(self, path, offload, impulse_scale):
         if offload == "process":
-            from recorder.writer_process import WriterProcess, model_table
+            from recorder.frames import model_table
+            from recorder.writer_process import WriterProcess
 
             return WriterProcess(
                 "rerun",

@@ -358,7 +358,7 @@ class RerunLogWriter:
         position (n, 2) m and angle (n,) rad, world; exists (n,) bool; per contact row: point
         (m, 2) m, unit normal (m, 2) from a to b, impulse (m,) N s, push_a, push_b (m, 2) m;
         stats: the nine `/stats` values in STAT_NAMES order, or None. `write` and the Rerun
-        writer process (`recorder.writer_process.RerunFrame`) both come here.
+        writer process (`recorder.frames.RerunFrame`) both come here.
         """
         from recorder.rerun_batch import step_arrays
 

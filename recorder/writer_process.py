@@ -14,8 +14,8 @@ Transport (both ends in this module):
   temporary file where memfd is missing), handed to the child as a file descriptor. Each step
   is one frame written contiguously at the next free offset, wrapping to 0 when it does not fit
   before the end. A frame larger than the ring travels inline in the command pipe instead.
-  MCAP frames (`pack`, `Frame`): a head with the /stats values, then the encoded `/bodies` and
-  `/contacts` messages, which the mcap library takes as they are. Rerun frames
+  MCAP frames (`recorder.frames`: `pack`, `Frame`): a head with the /stats values, then the encoded
+  `/bodies` and `/contacts` messages, which the mcap library takes as they are. Rerun frames
   (`recorder.pack.pack_rerun`, `read_rerun_frame`): only what the recording draws, as raw
   native-endian arrays, from which the child computes each step's outlines and arrows in place
   (`RerunLogWriter.append`); decoding protobuf back into a record had cost that child a
@@ -36,7 +36,6 @@ Transport (both ends in this module):
 
 from __future__ import annotations
 
-import hashlib
 import json
 import mmap
 import os
@@ -48,12 +47,20 @@ import subprocess
 import sys
 import tempfile
 import time
-from typing import NamedTuple
 
 import numpy as np
 
-from isaac.engine.records import Contacts, StepRecord
+from isaac.engine.records import StepRecord
 from isaac.errors import LogError
+from recorder.frames import (
+    FRAME_HEAD,
+    Frame,
+    frame_sizes,
+    pack,
+    pack_into,
+    put_stats,
+    read_rerun_frame,
+)
 
 # shared memory per writer, in frames of the scene's size, within RING_MIN..RING_MAX bytes,
 # mapped pre-faulted (a fresh page costs a fault in each process: writes over a cold 32 MiB
@@ -63,18 +70,6 @@ from isaac.errors import LogError
 RING_FRAMES = {"mcap": 64, "rerun": 128}
 RING_MIN, RING_MAX = 4 << 20, 64 << 20
 
-STAT_KEYS = (
-    "kinetic_energy",
-    "potential_energy",
-    "total_energy",
-    "linear_momentum_x",
-    "linear_momentum_y",
-    "angular_momentum",
-    "contact_count",
-    "max_depth",
-    "max_impulse",
-)
-
 # frames are announced to the child in batches: one wake-up per NOTIFY_EVERY steps, not per
 # step (a cross-CPU wake-up measured 10-20 us on this VM); a SIGKILLed parent loses at most
 # the unannounced ones, which no flush had covered yet either
@@ -82,283 +77,6 @@ NOTIFY_EVERY = 8
 
 _COMMAND = struct.Struct("<cQQQ")
 _REPLY = struct.Struct("<cQ")
-# step, time, n, m, stats (STAT_KEYS), bytes of the Bodies and of the Contacts message; the
-# two messages follow, each from an 8-byte boundary
-_HEAD = struct.Struct("<qdQQ" + "d" * len(STAT_KEYS) + "QQ")
-# byte offset of the /stats values in an MCAP frame's head and in a Rerun frame (after step,
-# time, n and m in both), where `write`'s caller-given stats replace the computed ones
-_STATS_AT = 32
-
-
-def _pad8(n: int) -> int:
-    return (n + 7) & ~7
-
-
-def _sizes(record: StepRecord) -> tuple[int, int, int]:
-    """Bytes of `record`'s Bodies and Contacts messages, and of its frame (a multiple of 8)."""
-    from recorder.pack import message_sizes
-
-    bodies, contacts = message_sizes(
-        int(record.step), int(record.angle.shape[0]), len(record.contacts)
-    )
-    return bodies, contacts, _HEAD.size + _pad8(bodies) + _pad8(contacts)
-
-
-def frame_size(record: StepRecord) -> int:
-    """Bytes of `record`'s frame (a multiple of 8)."""
-    return _sizes(record)[2]
-
-
-def rerun_frame_size(record: StepRecord) -> int:
-    """Bytes of `record`'s Rerun frame (`recorder.pack.rerun_offsets`; a multiple of 8)."""
-    from recorder.pack import rerun_offsets
-
-    return 8 * rerun_offsets(int(record.angle.shape[0]), len(record.contacts))[-1]
-
-
-class RerunFrame(NamedTuple):
-    """One step as the Rerun writer process receives it (`recorder.pack.pack_rerun`): views of
-    the frame's arrays, valid while its ring slot is, in `RerunLogWriter.append`'s order."""
-
-    step: int
-    time: float  # s
-    position: np.ndarray  # (n, 2) m, world
-    angle: np.ndarray  # (n,) rad, CCW
-    exists: np.ndarray  # (n,) bool
-    point: np.ndarray  # (m, 2) m, world
-    normal: np.ndarray  # (m, 2) unit, from a towards b
-    impulse: np.ndarray  # (m,) N s
-    push_a: np.ndarray  # (m, 2) m
-    push_b: np.ndarray  # (m, 2) m
-    stats: np.ndarray  # (9,) the /stats values in STAT_KEYS order
-
-
-def read_rerun_frame(buf: np.ndarray, at: int = 0) -> RerunFrame:
-    """The Rerun frame at byte ``at`` (a multiple of 8) of ``buf`` (uint8), as views."""
-    from recorder.pack import RERUN_HEAD, rerun_offsets
-
-    head = buf[at : at + 8 * RERUN_HEAD].view(np.int64)
-    step, n, m = int(head[0]), int(head[2]), int(head[3])
-    o = rerun_offsets(n, m)
-    words = buf[at : at + 8 * o[-1]].view(np.float64)
-    pairs = lambda k, rows: words[o[k] : o[k] + 2 * rows].reshape(rows, 2)  # noqa: E731
-    return RerunFrame(
-        step,
-        float(words[1]),
-        pairs(0, n),
-        words[o[1] : o[1] + n],
-        buf[at + 8 * o[2] : at + 8 * o[2] + n].view(np.bool_),
-        pairs(3, m),
-        pairs(4, m),
-        words[o[5] : o[5] + m],
-        pairs(6, m),
-        pairs(7, m),
-        words[4:RERUN_HEAD],
-    )
-
-
-def pack(record: StepRecord, stats: dict) -> bytes:
-    """`record` and its `stats` as one frame, encoded by the reference encoders
-    (`recorder.mcap_writer`); the compiled `recorder.pack` writes the same bytes."""
-    from recorder.mcap_writer import encode_bodies, encode_contacts
-
-    bodies, contacts = encode_bodies(record), encode_contacts(record)
-    head = _HEAD.pack(
-        int(record.step),
-        float(record.time),
-        int(record.angle.shape[0]),
-        len(record.contacts),
-        *(float(stats[k]) for k in STAT_KEYS),
-        len(bodies),
-        len(contacts),
-    )
-    pad = bytes(_pad8(len(bodies)) - len(bodies))
-    return b"".join((head, bodies, pad, contacts, bytes(_pad8(len(contacts)) - len(contacts))))
-
-
-def pack_into(
-    buf: np.ndarray,
-    pos: int,
-    record: StepRecord,
-    model,
-    gravity,
-    stats: dict | None = None,
-    sizes: tuple[int, int] | None = None,
-) -> bool:
-    """Encode `record`'s frame (`pack`'s bytes) at byte ``pos`` (a multiple of 8) of ``buf``
-    (uint8, ``frame_size(record)`` bytes from ``pos`` at least) with the compiled
-    `recorder.pack.pack_frame`; little-endian machines only.
-
-    model: ``mass``, ``inertia`` (float64) and ``concrete`` (bool) arrays, for the /stats sums;
-    gravity: (gx, gy) m/s^2. stats: the /stats values to write instead of the computed ones.
-    sizes: the messages' sizes when the caller has them (`_sizes`). Returns False, the frame
-    unusable, when a float of the record is NaN or infinite.
-    """
-    from recorder.pack import pack_frame
-
-    bodies_size, contacts_size = sizes if sizes is not None else _sizes(record)[:2]
-    c = record.contacts
-    i32 = np.int32
-    bad, bodies_len, contacts_len = pack_frame(
-        buf,
-        pos,
-        int(record.step),
-        float(record.time),
-        int(record.angle.shape[0]),
-        len(c),
-        _pad8(bodies_size),
-        record.position,
-        record.angle,
-        record.velocity,
-        record.angular_velocity,
-        np.asarray(record.exists, dtype=bool),
-        np.asarray(c.substep, dtype=i32),
-        np.asarray(c.a, dtype=i32),
-        np.asarray(c.b, dtype=i32),
-        np.asarray(c.feature, dtype=i32),
-        np.asarray(c.slot, dtype=i32),
-        c.point,
-        c.normal,
-        c.depth,
-        c.push_a,
-        c.push_b,
-        c.impulse,
-        c.tangent_impulse,
-        c.restitution,
-        model.mass,
-        model.inertia,
-        model.concrete,
-        *gravity,
-    )
-    if bad >= 0:
-        return False
-    assert (bodies_len, contacts_len) == (bodies_size, contacts_size)
-    if stats is not None:
-        _put_stats(buf, pos, stats)
-    return True
-
-
-def _put_stats(buf: np.ndarray, pos: int, stats: dict) -> None:
-    """The caller's /stats values over the computed ones, in the head of the frame at ``pos``
-    (MCAP or Rerun frame: both keep them at _STATS_AT)."""
-    words = buf[pos + _STATS_AT : pos + _STATS_AT + 8 * len(STAT_KEYS)].view(np.float64)
-    words[:] = [float(stats[k]) for k in STAT_KEYS]
-
-
-class Frame:
-    """One step as the writer process receives it: the encoded `/bodies` and `/contacts`
-    messages (memoryviews of the frame) and the `/stats` values, without a state hash."""
-
-    def __init__(self, data) -> None:
-        head = _HEAD.unpack_from(data, 0)
-        self.step, self.time, self.n, self.m = head[:4]
-        k = 4 + len(STAT_KEYS)
-        self.stats = dict(zip(STAT_KEYS, head[4:k]))
-        self.stats["contact_count"] = int(self.stats["contact_count"])
-        bodies_len, contacts_len = head[k:]
-        view = memoryview(data)
-        self.bodies = view[_HEAD.size : _HEAD.size + bodies_len]
-        at = _HEAD.size + _pad8(bodies_len)
-        self.contacts = view[at : at + contacts_len]
-        self._fields: list[memoryview] | None = None
-
-    def body_fields(self) -> list[memoryview]:
-        """The raw little-endian values of Bodies fields 3-7 (position, angle, velocity,
-        angular velocity, exists), empty when left out."""
-        if self._fields is None:
-            self._fields = _packed_fields(self.bodies, 5)
-        return self._fields
-
-    def state_hash(self) -> str:
-        """`isaac.engine.records.state_hash` of the step, from the message's bytes (the same)."""
-        h = hashlib.sha256()
-        for part in self.body_fields():
-            h.update(part)
-        return h.hexdigest()
-
-    def exists(self) -> np.ndarray:
-        flags = self.body_fields()[4]
-        return np.frombuffer(flags, dtype=np.bool_) if len(flags) else np.ones(self.n, dtype=bool)
-
-    def record(self) -> StepRecord:
-        """The step as a StepRecord: read-only views of one copy of the frame's values."""
-        from recorder.pack import CONTACT_FIELDS
-
-        n, m = self.n, self.m
-        data = bytes(self.bodies) + bytes(self.contacts)  # one copy: the ring slot is reused
-        base = len(self.bodies)
-        spans = _field_spans(self.bodies, 5) + [
-            (start + base, size) for start, size in _field_spans(self.contacts, 13)
-        ]
-
-        def values(k, dtype, shape):
-            start, size = spans[k]
-            if not size:
-                return np.zeros(shape, dtype=dtype)
-            return np.frombuffer(
-                data, dtype=dtype, count=size // np.dtype(dtype).itemsize, offset=start
-            ).reshape(shape)
-
-        exists = values(4, np.bool_, (n,)) if spans[4][1] else np.ones(n, dtype=bool)
-        c = {}
-        for j, name in enumerate(CONTACT_FIELDS):
-            pair = name in ("point", "normal", "push_a", "push_b")
-            c[name] = values(5 + j, "<i4" if j < 5 else "<f8", (m, 2) if pair else (m,))
-        return StepRecord(
-            step=self.step,
-            time=self.time,
-            position=values(0, "<f8", (n, 2)),
-            angle=values(1, "<f8", (n,)),
-            velocity=values(2, "<f8", (n, 2)),
-            angular_velocity=values(3, "<f8", (n,)),
-            exists=exists,
-            contacts=Contacts(**c),
-        )
-
-
-def _field_spans(buf, count: int) -> list[tuple[int, int]]:
-    """(start, bytes) of the payloads of fields 3 .. count + 2 of an encoded Bodies or
-    Contacts message (their packed values), (0, 0) when left out."""
-    from recorder.schema import _read_varint
-
-    out = {}
-    pos = 0
-    while pos < len(buf):
-        key, pos = _read_varint(buf, pos)
-        number, wire = key >> 3, key & 7
-        if wire == 0:
-            _, pos = _read_varint(buf, pos)
-        elif wire == 1:
-            pos += 8
-        else:
-            length, pos = _read_varint(buf, pos)
-            out[number] = (pos, length)
-            pos += length
-    return [out.get(k, (0, 0)) for k in range(3, count + 3)]
-
-
-def _packed_fields(buf, count: int) -> list[memoryview]:
-    """The payloads of fields 3 .. count + 2 of an encoded message, empty when left out."""
-    return [buf[start : start + size] for start, size in _field_spans(buf, count)]
-
-
-def model_table(model) -> dict:
-    """What a writer needs of the model, as plain lists and arrays (pickled to the child)."""
-    return {
-        "names": [str(x) for x in model.names],
-        **{
-            key: np.asarray(getattr(model, key))
-            for key in (
-                "vertices_local",
-                "vertex_count",
-                "mass",
-                "inertia",
-                "restitution",
-                "friction",
-                "concrete",
-            )
-        },
-    }
 
 
 def ring_bytes_for(kind: str, n_bodies: int) -> int:
@@ -366,7 +84,7 @@ def ring_bytes_for(kind: str, n_bodies: int) -> int:
     ~3 contact rows per body."""
     from recorder.pack import message_sizes
 
-    estimate = _HEAD.size + sum(message_sizes(0, n_bodies, 3 * n_bodies)) + 16
+    estimate = FRAME_HEAD.size + sum(message_sizes(0, n_bodies, 3 * n_bodies)) + 16
     size = min(max(RING_FRAMES[kind] * estimate, RING_MIN), RING_MAX)
     return (size + mmap.PAGESIZE - 1) // mmap.PAGESIZE * mmap.PAGESIZE
 
@@ -528,7 +246,7 @@ class WriterProcess:
         """
         if self.kind == "rerun":
             return self._write_rerun(record, stats)
-        bodies_size, contacts_size, size = _sizes(record)
+        bodies_size, contacts_size, size = frame_sizes(record)
         if size > self.capacity or not self._compiled:
             return self._write_inline(record, stats)
         pos, end = self._reserve(size)
@@ -597,7 +315,7 @@ class WriterProcess:
         ):
             return False
         if stats is not None:
-            _put_stats(buf, pos, stats)
+            put_stats(buf, pos, stats)
         if inline:
             self._notify()
             self._send(b"I", size, payload=buf.tobytes())
@@ -636,7 +354,7 @@ class WriterProcess:
         bodies_size: int | None = None,
         contacts_size: int | None = None,
     ) -> bool:
-        """Encode the frame at ``pos`` of the ring (its messages' sizes from `_sizes`, given by
+        """Encode the frame at ``pos`` of the ring (its messages' sizes from `frame_sizes`, given by
         `write`, which needed them first); False (frame unusable) on NaN/infinity."""
         return pack_into(
             self._ring_u8,

@@ -506,7 +506,7 @@ class StepEncoder:
         self._buf = np.zeros(0, dtype=np.uint8)
 
     def encode(self, record: StepRecord) -> dict[str, bytes]:
-        from recorder.writer_process import Frame, frame_size, pack_into
+        from recorder.frames import Frame, frame_size, pack_into
 
         if self._compiled:
             size = frame_size(record)

@@ -16,6 +16,7 @@ import pytest
 from isaac.engine.records import Contacts, StepRecord, state_hash
 from isaac.errors import LogError, SimulationError
 from recorder import Recorder
+from recorder import frames as F
 from recorder import writer_process as W
 from recorder.reader import LogReader
 from recorder.stats import compute_stats
@@ -68,7 +69,7 @@ def _packer(ring, sim):
 def test_the_compiled_frame_head_has_the_size_the_reader_expects():
     from recorder.pack import HEAD_BYTES
 
-    assert W._HEAD.size == HEAD_BYTES  # pack_frame writes the head that Frame unpacks
+    assert F.FRAME_HEAD.size == HEAD_BYTES  # pack_frame writes the head that Frame unpacks
 
 
 def test_the_compiled_encoder_writes_the_reference_encoders_bytes_and_stats():
@@ -81,12 +82,12 @@ def test_the_compiled_encoder_writes_the_reference_encoders_bytes_and_stats():
     assert any(len(r.contacts) == 0 for r in records)  # step 0: empty fields left out
     for r in records:
         stats = compute_stats(sim.model, (0.0, -9.81), r, with_hash=False)
-        size = W.frame_size(r)
+        size = F.frame_size(r)
         assert proc._compiled_pack(8, r, None)
         frame = bytes(ring[8 : 8 + size])
-        assert W._HEAD.size == HEAD_BYTES
-        assert frame == W.pack(r, stats)  # compiled and reference encoding agree byte for byte
-        got = W.Frame(frame)
+        assert F.FRAME_HEAD.size == HEAD_BYTES
+        assert frame == F.pack(r, stats)  # compiled and reference encoding agree byte for byte
+        got = F.Frame(frame)
         assert bytes(got.bodies) == encode_bodies(r)
         assert bytes(got.contacts) == encode_contacts(r)
         assert got.stats == stats  # the same kernel, the same sums
@@ -191,7 +192,7 @@ def test_the_rerun_frame_round_trips_every_field_bit_for_bit():
             )
             == -1
         )
-        frame = W.read_rerun_frame(ring, 24)
+        frame = F.read_rerun_frame(ring, 24)
         assert (frame.step, frame.time) == (r.step, r.time)
         for name in _RERUN_FIELDS:
             want = getattr(r, name) if hasattr(r, name) else getattr(c, name)
@@ -199,8 +200,8 @@ def test_the_rerun_frame_round_trips_every_field_bit_for_bit():
             assert got.shape == want.shape and got.dtype == want.dtype, name
             assert got.tobytes() == np.ascontiguousarray(want).tobytes(), name
         stats = compute_stats(sim.model, (0.0, -9.81), r, with_hash=False)
-        assert dict(zip(W.STAT_KEYS, frame.stats.tolist())) == stats  # the same sums
-        assert W.rerun_frame_size(r) % 8 == 0
+        assert dict(zip(F.STAT_KEYS, frame.stats.tolist())) == stats  # the same sums
+        assert F.rerun_frame_size(r) % 8 == 0
 
 
 _FLOAT_FIELDS = (
@@ -291,14 +292,14 @@ def _rrd_content(path):
 @pytest.mark.parametrize("ring_bytes", [None, 8192, 4096])
 def test_the_rerun_writer_process_writes_what_writing_in_process_does(tmp_path, ring_bytes):
     sim, records = _records(n=40, contacts=60, steps=150, leave_at=70)
-    assert W.rerun_frame_size(records[5]) == 5424
+    assert F.rerun_frame_size(records[5]) == 5424
     paths = {}
     for offload in ("none", "process"):
         path = tmp_path / f"{offload}.rrd"
         rec = Recorder(sim, rrd_path=str(path), scene_text=SCENE_TEXT, offload=offload)
         if offload == "process" and ring_bytes is not None:
             config = {
-                "model": W.model_table(rec.model),
+                "model": F.model_table(rec.model),
                 "gravity": rec.gravity,
                 "scene": {"name": str(rec.scene.name), "dt": float(rec.scene.world.dt)},
                 "impulse_scale": None,
@@ -337,7 +338,7 @@ def _mcap_config(rec):
     from recorder.mcap_writer import build_metadata
 
     return {
-        "model": W.model_table(rec.model),
+        "model": F.model_table(rec.model),
         "gravity": rec.gravity,
         "scene": {"name": str(rec.scene.name), "dt": float(rec.scene.world.dt)},
         "scene_text": rec.scene_text,
@@ -353,7 +354,7 @@ def test_a_frame_larger_than_the_ring_goes_inline_and_arrives_whole(tmp_path):
     rec = Recorder(sim, mcap_path=str(tmp_path / "a.mcap"), scene_text=SCENE_TEXT)
     rec.mcap.close()
     rec.mcap = W.WriterProcess("mcap", str(tmp_path / "a.mcap"), _mcap_config(rec), ring_bytes=4096)
-    assert W.frame_size(records[5]) > 4096
+    assert F.frame_size(records[5]) > 4096
     for r in records:
         rec.write(r)
     rec.close()

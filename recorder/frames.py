@@ -1,0 +1,308 @@
+"""Frames: one step as the writer processes receive it, packed by the simulating process.
+
+MCAP frames (`pack`, `pack_into`, read back by `Frame`): a head with step, time, body and contact
+counts and the /stats values, then the encoded `/bodies` and `/contacts` messages, which the mcap
+library takes as they are. Rerun frames (`recorder.pack.pack_rerun`, read back by
+`read_rerun_frame`): only what the recording draws, as raw native-endian arrays. The transport
+that carries them (shared-memory ring, command pipe) is `recorder.writer_process`.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import struct
+from typing import NamedTuple
+
+import numpy as np
+
+from isaac.engine.records import Contacts, StepRecord
+
+STAT_KEYS = (
+    "kinetic_energy",
+    "potential_energy",
+    "total_energy",
+    "linear_momentum_x",
+    "linear_momentum_y",
+    "angular_momentum",
+    "contact_count",
+    "max_depth",
+    "max_impulse",
+)
+
+# step, time, n, m, stats (STAT_KEYS), bytes of the Bodies and of the Contacts message; the
+# two messages follow, each from an 8-byte boundary
+FRAME_HEAD = struct.Struct("<qdQQ" + "d" * len(STAT_KEYS) + "QQ")
+# byte offset of the /stats values in an MCAP frame's head and in a Rerun frame (after step,
+# time, n and m in both), where `write`'s caller-given stats replace the computed ones
+STATS_AT = 32
+
+
+def _pad8(n: int) -> int:
+    return (n + 7) & ~7
+
+
+def frame_sizes(record: StepRecord) -> tuple[int, int, int]:
+    """Bytes of `record`'s Bodies and Contacts messages, and of its frame (a multiple of 8)."""
+    from recorder.pack import message_sizes
+
+    bodies, contacts = message_sizes(
+        int(record.step), int(record.angle.shape[0]), len(record.contacts)
+    )
+    return bodies, contacts, FRAME_HEAD.size + _pad8(bodies) + _pad8(contacts)
+
+
+def frame_size(record: StepRecord) -> int:
+    """Bytes of `record`'s frame (a multiple of 8)."""
+    return frame_sizes(record)[2]
+
+
+def rerun_frame_size(record: StepRecord) -> int:
+    """Bytes of `record`'s Rerun frame (`recorder.pack.rerun_offsets`; a multiple of 8)."""
+    from recorder.pack import rerun_offsets
+
+    return 8 * rerun_offsets(int(record.angle.shape[0]), len(record.contacts))[-1]
+
+
+class RerunFrame(NamedTuple):
+    """One step as the Rerun writer process receives it (`recorder.pack.pack_rerun`): views of
+    the frame's arrays, valid while its ring slot is, in `RerunLogWriter.append`'s order."""
+
+    step: int
+    time: float  # s
+    position: np.ndarray  # (n, 2) m, world
+    angle: np.ndarray  # (n,) rad, CCW
+    exists: np.ndarray  # (n,) bool
+    point: np.ndarray  # (m, 2) m, world
+    normal: np.ndarray  # (m, 2) unit, from a towards b
+    impulse: np.ndarray  # (m,) N s
+    push_a: np.ndarray  # (m, 2) m
+    push_b: np.ndarray  # (m, 2) m
+    stats: np.ndarray  # (9,) the /stats values in STAT_KEYS order
+
+
+def read_rerun_frame(buf: np.ndarray, at: int = 0) -> RerunFrame:
+    """The Rerun frame at byte ``at`` (a multiple of 8) of ``buf`` (uint8), as views."""
+    from recorder.pack import RERUN_HEAD, rerun_offsets
+
+    head = buf[at : at + 8 * RERUN_HEAD].view(np.int64)
+    step, n, m = int(head[0]), int(head[2]), int(head[3])
+    o = rerun_offsets(n, m)
+    words = buf[at : at + 8 * o[-1]].view(np.float64)
+    pairs = lambda k, rows: words[o[k] : o[k] + 2 * rows].reshape(rows, 2)  # noqa: E731
+    return RerunFrame(
+        step,
+        float(words[1]),
+        pairs(0, n),
+        words[o[1] : o[1] + n],
+        buf[at + 8 * o[2] : at + 8 * o[2] + n].view(np.bool_),
+        pairs(3, m),
+        pairs(4, m),
+        words[o[5] : o[5] + m],
+        pairs(6, m),
+        pairs(7, m),
+        words[4:RERUN_HEAD],
+    )
+
+
+def pack(record: StepRecord, stats: dict) -> bytes:
+    """`record` and its `stats` as one frame, encoded by the reference encoders
+    (`recorder.mcap_writer`); the compiled `recorder.pack` writes the same bytes."""
+    from recorder.mcap_writer import encode_bodies, encode_contacts
+
+    bodies, contacts = encode_bodies(record), encode_contacts(record)
+    head = FRAME_HEAD.pack(
+        int(record.step),
+        float(record.time),
+        int(record.angle.shape[0]),
+        len(record.contacts),
+        *(float(stats[k]) for k in STAT_KEYS),
+        len(bodies),
+        len(contacts),
+    )
+    pad = bytes(_pad8(len(bodies)) - len(bodies))
+    return b"".join((head, bodies, pad, contacts, bytes(_pad8(len(contacts)) - len(contacts))))
+
+
+def pack_into(
+    buf: np.ndarray,
+    pos: int,
+    record: StepRecord,
+    model,
+    gravity,
+    stats: dict | None = None,
+    sizes: tuple[int, int] | None = None,
+) -> bool:
+    """Encode `record`'s frame (`pack`'s bytes) at byte ``pos`` (a multiple of 8) of ``buf``
+    (uint8, ``frame_size(record)`` bytes from ``pos`` at least) with the compiled
+    `recorder.pack.pack_frame`; little-endian machines only.
+
+    model: ``mass``, ``inertia`` (float64) and ``concrete`` (bool) arrays, for the /stats sums;
+    gravity: (gx, gy) m/s^2. stats: the /stats values to write instead of the computed ones.
+    sizes: the messages' sizes when the caller has them (`frame_sizes`). Returns False, the frame
+    unusable, when a float of the record is NaN or infinite.
+    """
+    from recorder.pack import pack_frame
+
+    bodies_size, contacts_size = sizes if sizes is not None else frame_sizes(record)[:2]
+    c = record.contacts
+    i32 = np.int32
+    bad, bodies_len, contacts_len = pack_frame(
+        buf,
+        pos,
+        int(record.step),
+        float(record.time),
+        int(record.angle.shape[0]),
+        len(c),
+        _pad8(bodies_size),
+        record.position,
+        record.angle,
+        record.velocity,
+        record.angular_velocity,
+        np.asarray(record.exists, dtype=bool),
+        np.asarray(c.substep, dtype=i32),
+        np.asarray(c.a, dtype=i32),
+        np.asarray(c.b, dtype=i32),
+        np.asarray(c.feature, dtype=i32),
+        np.asarray(c.slot, dtype=i32),
+        c.point,
+        c.normal,
+        c.depth,
+        c.push_a,
+        c.push_b,
+        c.impulse,
+        c.tangent_impulse,
+        c.restitution,
+        model.mass,
+        model.inertia,
+        model.concrete,
+        *gravity,
+    )
+    if bad >= 0:
+        return False
+    assert (bodies_len, contacts_len) == (bodies_size, contacts_size)
+    if stats is not None:
+        put_stats(buf, pos, stats)
+    return True
+
+
+def put_stats(buf: np.ndarray, pos: int, stats: dict) -> None:
+    """The caller's /stats values over the computed ones, in the head of the frame at ``pos``
+    (MCAP or Rerun frame: both keep them at STATS_AT)."""
+    words = buf[pos + STATS_AT : pos + STATS_AT + 8 * len(STAT_KEYS)].view(np.float64)
+    words[:] = [float(stats[k]) for k in STAT_KEYS]
+
+
+class Frame:
+    """One step as the writer process receives it: the encoded `/bodies` and `/contacts`
+    messages (memoryviews of the frame) and the `/stats` values, without a state hash."""
+
+    def __init__(self, data) -> None:
+        head = FRAME_HEAD.unpack_from(data, 0)
+        self.step, self.time, self.n, self.m = head[:4]
+        k = 4 + len(STAT_KEYS)
+        self.stats = dict(zip(STAT_KEYS, head[4:k]))
+        self.stats["contact_count"] = int(self.stats["contact_count"])
+        bodies_len, contacts_len = head[k:]
+        view = memoryview(data)
+        self.bodies = view[FRAME_HEAD.size : FRAME_HEAD.size + bodies_len]
+        at = FRAME_HEAD.size + _pad8(bodies_len)
+        self.contacts = view[at : at + contacts_len]
+        self._fields: list[memoryview] | None = None
+
+    def body_fields(self) -> list[memoryview]:
+        """The raw little-endian values of Bodies fields 3-7 (position, angle, velocity,
+        angular velocity, exists), empty when left out."""
+        if self._fields is None:
+            self._fields = _packed_fields(self.bodies, 5)
+        return self._fields
+
+    def state_hash(self) -> str:
+        """`isaac.engine.records.state_hash` of the step, from the message's bytes (the same)."""
+        h = hashlib.sha256()
+        for part in self.body_fields():
+            h.update(part)
+        return h.hexdigest()
+
+    def exists(self) -> np.ndarray:
+        flags = self.body_fields()[4]
+        return np.frombuffer(flags, dtype=np.bool_) if len(flags) else np.ones(self.n, dtype=bool)
+
+    def record(self) -> StepRecord:
+        """The step as a StepRecord: read-only views of one copy of the frame's values."""
+        from recorder.pack import CONTACT_FIELDS
+
+        n, m = self.n, self.m
+        data = bytes(self.bodies) + bytes(self.contacts)  # one copy: the ring slot is reused
+        base = len(self.bodies)
+        spans = _field_spans(self.bodies, 5) + [
+            (start + base, size) for start, size in _field_spans(self.contacts, 13)
+        ]
+
+        def values(k, dtype, shape):
+            start, size = spans[k]
+            if not size:
+                return np.zeros(shape, dtype=dtype)
+            return np.frombuffer(
+                data, dtype=dtype, count=size // np.dtype(dtype).itemsize, offset=start
+            ).reshape(shape)
+
+        exists = values(4, np.bool_, (n,)) if spans[4][1] else np.ones(n, dtype=bool)
+        c = {}
+        for j, name in enumerate(CONTACT_FIELDS):
+            pair = name in ("point", "normal", "push_a", "push_b")
+            c[name] = values(5 + j, "<i4" if j < 5 else "<f8", (m, 2) if pair else (m,))
+        return StepRecord(
+            step=self.step,
+            time=self.time,
+            position=values(0, "<f8", (n, 2)),
+            angle=values(1, "<f8", (n,)),
+            velocity=values(2, "<f8", (n, 2)),
+            angular_velocity=values(3, "<f8", (n,)),
+            exists=exists,
+            contacts=Contacts(**c),
+        )
+
+
+def _field_spans(buf, count: int) -> list[tuple[int, int]]:
+    """(start, bytes) of the payloads of fields 3 .. count + 2 of an encoded Bodies or
+    Contacts message (their packed values), (0, 0) when left out."""
+    from recorder.schema import _read_varint
+
+    out = {}
+    pos = 0
+    while pos < len(buf):
+        key, pos = _read_varint(buf, pos)
+        number, wire = key >> 3, key & 7
+        if wire == 0:
+            _, pos = _read_varint(buf, pos)
+        elif wire == 1:
+            pos += 8
+        else:
+            length, pos = _read_varint(buf, pos)
+            out[number] = (pos, length)
+            pos += length
+    return [out.get(k, (0, 0)) for k in range(3, count + 3)]
+
+
+def _packed_fields(buf, count: int) -> list[memoryview]:
+    """The payloads of fields 3 .. count + 2 of an encoded message, empty when left out."""
+    return [buf[start : start + size] for start, size in _field_spans(buf, count)]
+
+
+def model_table(model) -> dict:
+    """What a writer needs of the model, as plain lists and arrays (pickled to the child)."""
+    return {
+        "names": [str(x) for x in model.names],
+        **{
+            key: np.asarray(getattr(model, key))
+            for key in (
+                "vertices_local",
+                "vertex_count",
+                "mass",
+                "inertia",
+                "restitution",
+                "friction",
+                "concrete",
+            )
+        },
+    }
