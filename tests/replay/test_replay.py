@@ -15,7 +15,8 @@ from isaac.engine.diagnostics import state_hash
 from isaac.engine.simulation import Simulation
 from isaac.errors import LogError, SceneError
 from recorder import Recorder
-from replay.compare import diff_logs, replay_log, ulp_distance, ulp_distances
+from replay.compare import diff_logs, replay_log
+from replay.divergence import ulp_distance, ulp_distances
 from replay.reader import RawLog
 
 sys.path.insert(0, str(Path(__file__).parent))

@@ -1,0 +1,285 @@
+"""Where two payloads of one topic differ: the field, the body or contact row, both values and
+their distance in ULPs (`locate`), for a replay or a diff whose bytes did not match."""
+
+from __future__ import annotations
+
+import struct
+from collections.abc import Callable
+
+import numpy as np
+
+from recorder import schema as S
+from replay.report import Divergence
+
+# per-row 2-vector fields, flattened x0, y0, x1, y1 ... in the log
+_VECTOR_FIELDS = {"position", "velocity", "point", "normal", "push_a", "push_b"}
+_CONTACT_KEY = ("substep", "a", "b", "slot")
+
+
+# ---------------------------------------------------------------------------------------------
+# ULP distance
+
+_INT64_MIN = -(1 << 63)
+
+
+def _ordered(bits: int) -> int:
+    """Map float64 bits (as a signed int64) onto a line where adjacent floats differ by 1.
+
+    Positive floats keep their bits; negative floats (sign bit set, so a negative int64) are
+    reflected: -0.0 maps to 0 like +0.0, the smallest negative subnormal to -1, and so on.
+    """
+    return bits if bits >= 0 else _INT64_MIN - bits
+
+
+def ulp_distance(a: float, b: float) -> int | None:
+    """Number of float64 values between ``a`` and ``b`` (0 when equal; None if either is NaN).
+
+    Computed on the int64 view of the two doubles, sign handled by reflecting negatives, so
+    e.g. ``ulp_distance(x, np.nextafter(x, inf)) == 1`` and ``ulp_distance(-0.0, 0.0) == 0``.
+    """
+    if a != a or b != b:
+        return None
+    ia = struct.unpack("<q", struct.pack("<d", a))[0]
+    ib = struct.unpack("<q", struct.pack("<d", b))[0]
+    return abs(_ordered(ia) - _ordered(ib))
+
+
+def ulp_distances(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Element-wise `ulp_distance` of two float64 arrays, as uint64 (NaN pairs give 0)."""
+    ia = np.ascontiguousarray(a, dtype="<f8").view(np.int64)
+    ib = np.ascontiguousarray(b, dtype="<f8").view(np.int64)
+    oa = np.where(ia >= 0, ia, np.int64(_INT64_MIN) - ia)
+    ob = np.where(ib >= 0, ib, np.int64(_INT64_MIN) - ib)
+    # the difference of two int64 fits in a uint64: subtract in wrapping arithmetic, larger first
+    with np.errstate(over="ignore"):
+        d = np.where(oa >= ob, (oa - ob).view(np.uint64), (ob - oa).view(np.uint64))
+    nan = np.isnan(a) | np.isnan(b)
+    return np.where(nan, np.uint64(0), d)
+
+
+# ---------------------------------------------------------------------------------------------
+# locating a difference inside two decoded messages
+
+
+def _float_mismatch(la: np.ndarray, ra: np.ndarray, tolerance: float | None) -> np.ndarray:
+    """Mask of elements that differ: any bit (bitwise), or beyond tolerance."""
+    if tolerance is None:
+        return np.ascontiguousarray(la, dtype="<f8").view(np.uint64) != np.ascontiguousarray(
+            ra, dtype="<f8"
+        ).view(np.uint64)
+    with np.errstate(invalid="ignore", over="ignore"):
+        close = np.abs(la - ra) <= tolerance + tolerance * np.abs(la)
+    same_nan = np.isnan(la) & np.isnan(ra)
+    return ~(close | same_nan)
+
+
+class _Finder:
+    """Collects the differences of one channel at one step; keeps the first, counts the rest."""
+
+    def __init__(self, step: int, channel: str, tolerance: float | None) -> None:
+        self.step = step
+        self.channel = channel
+        self.tolerance = tolerance
+        self.first: Divergence | None = None
+        self.count = 0
+        self.max_ulps: int | None = None
+        self.bit_differences = 0  # values whose bits differ (within tolerance or not)
+
+    def note_ulps(self, ulps: np.ndarray) -> None:
+        if ulps.size:
+            m = int(ulps.max())
+            self.max_ulps = m if self.max_ulps is None else max(self.max_ulps, m)
+
+    def array(self, name: str, la, ra, *, is_float: bool, where: Callable[[int], dict]) -> None:
+        la = np.atleast_1d(np.asarray(la))
+        ra = np.atleast_1d(np.asarray(ra))
+        if la.shape != ra.shape:
+            self._add(
+                Divergence(
+                    self.step,
+                    self.channel,
+                    "count",
+                    field=name,
+                    logged=int(la.size),
+                    replayed=int(ra.size),
+                ),
+                1,
+            )
+            return
+        if is_float:
+            la = la.astype(np.float64, copy=False)
+            ra = ra.astype(np.float64, copy=False)
+            bits = la.view(np.uint64) != ra.view(np.uint64)
+            n_bits = int(np.count_nonzero(bits))
+            if not n_bits:
+                return
+            self.bit_differences += n_bits
+            ulps = ulp_distances(la[bits], ra[bits])
+            self.note_ulps(ulps)
+            bad = _float_mismatch(la, ra, self.tolerance) if self.tolerance is not None else bits
+        else:
+            bad = la != ra
+            self.bit_differences += int(np.count_nonzero(bad))
+        idx = np.flatnonzero(bad)
+        if not idx.size:
+            return
+        i = int(idx[0])
+        lv, rv = la[i].item(), ra[i].item()
+        label = name
+        if name in _VECTOR_FIELDS:
+            label = f"{name}.{'xy'[i % 2]}"
+            i //= 2
+        d = Divergence(
+            self.step,
+            self.channel,
+            "value",
+            field=label,
+            logged=lv,
+            replayed=rv,
+            ulps=ulp_distance(lv, rv) if is_float else None,
+            **where(i),
+        )
+        self._add(d, int(idx.size))
+
+    def scalar(self, name: str, lv, rv, *, is_float: bool) -> None:
+        if is_float:
+            self.array(name, lv, rv, is_float=True, where=lambda i: {})
+        elif lv != rv:
+            if name == "state_hash" and self.tolerance is not None:
+                return  # a hash cannot be close: in tolerance mode it is not compared
+            self.bit_differences += 1
+            self._add(
+                Divergence(self.step, self.channel, "value", field=name, logged=lv, replayed=rv), 1
+            )
+
+    def _add(self, d: Divergence, n: int) -> None:
+        self.count += n
+        if self.first is None:
+            self.first = d
+
+    def result(self) -> Divergence | None:
+        if self.first is not None:
+            self.first.differing_values = self.count
+            self.first.max_ulps = self.max_ulps
+        return self.first
+
+
+def locate(
+    topic: str,
+    step: int,
+    logged: bytes,
+    replayed: bytes,
+    names: list,
+    tolerance: float | None = None,
+) -> tuple[Divergence | None, int | None]:
+    """Decode two payloads of ``topic`` that differ in bytes and find where.
+
+    Returns (the first difference beyond the tolerance or None, the largest ULP distance seen).
+    Fields are visited in message order; within a field the lowest body / row index comes first.
+    """
+    message = S.TOPICS[topic]
+    try:
+        dl = S.decode(message, logged)
+    except (S.WireError, UnicodeDecodeError) as exc:
+        return Divergence(
+            step, topic, "error", detail=f"the logged message does not decode ({exc})"
+        ), None
+    dr = S.decode(message, replayed)
+    f = _Finder(step, topic, tolerance)
+
+    def body(i: int) -> dict:
+        return {"body": i, "body_name": str(names[i]) if 0 <= i < len(names) else None}
+
+    spec = S.MESSAGES[message]
+    if topic == "/bodies":
+        nl, nr = dl["angle"].size, dr["angle"].size
+        if nl != nr:
+            return Divergence(step, topic, "count", field="bodies", logged=nl, replayed=nr), None
+        for name, _num, typ, repeated in spec:
+            if repeated:
+                f.array(name, dl[name], dr[name], is_float=typ == "double", where=body)
+            else:
+                f.scalar(name, dl[name], dr[name], is_float=typ == "double")
+    elif topic == "/contacts":
+        ml, mr = dl["a"].size, dr["a"].size
+
+        def row(i: int) -> dict:
+            c = {"row": i}
+            for k in _CONTACT_KEY:
+                c[k] = int(dl[k][i]) if i < dl[k].size else None
+            for side in ("a", "b"):
+                j = c[side]
+                if j is not None and 0 <= j < len(names):
+                    c[f"{side}_name"] = str(names[j])
+            return {"contact": c}
+
+        if ml != mr:
+            # the first row whose identity (sub-step, a, b, slot) differs says where it starts
+            m = min(ml, mr)
+            keys_l = np.stack([dl[k][:m].astype(np.int64) for k in _CONTACT_KEY])
+            keys_r = np.stack([dr[k][:m].astype(np.int64) for k in _CONTACT_KEY])
+            off = np.flatnonzero((keys_l != keys_r).any(axis=0))
+            i = int(off[0]) if off.size else m
+            where = row(i)["contact"] if i < ml else None
+            detail = f"the rows agree up to row {i - 1}" if i > 0 else "row 0 already differs"
+            if where is not None:
+                detail += (
+                    f"; logged row {i} is {where.get('a_name', where['a'])!r}-"
+                    f"{where.get('b_name', where['b'])!r} slot {where['slot']}"
+                )
+            return Divergence(
+                step,
+                topic,
+                "count",
+                field="contacts",
+                logged=ml,
+                replayed=mr,
+                contact=where,
+                detail=detail,
+            ), None
+        for name, _num, typ, repeated in spec:
+            if repeated:
+                f.array(name, dl[name], dr[name], is_float=typ == "double", where=row)
+            else:
+                f.scalar(name, dl[name], dr[name], is_float=typ == "double")
+    elif topic == "/stats":
+        for name, _num, typ, _repeated in spec:
+            f.scalar(name, dl[name], dr[name], is_float=typ == "double")
+    else:  # /world
+        f.scalar("step", dl["step"], dr["step"], is_float=False)
+        f.scalar("time", dl["time"], dr["time"], is_float=True)
+        bl, br = dl["bodies"], dr["bodies"]
+        if len(bl) != len(br):
+            return Divergence(
+                step, topic, "count", field="bodies", logged=len(bl), replayed=len(br)
+            ), None
+        for i, (a, b) in enumerate(zip(bl, br)):
+            for name, _num, typ, repeated in S.MESSAGES["Body"]:
+                if repeated:
+                    f.array(name, a[name], b[name], is_float=True, where=lambda _j, i=i: body(i))
+                elif a[name] != b[name] or (
+                    typ == "double" and ulp_distance(a[name], b[name]) != 0
+                ):
+                    if typ == "double":
+                        f.array(
+                            name, a[name], b[name], is_float=True, where=lambda _j, i=i: body(i)
+                        )
+                    else:
+                        f.bit_differences += 1
+                        f._add(
+                            Divergence(
+                                step,
+                                topic,
+                                "value",
+                                field=name,
+                                logged=a[name],
+                                replayed=b[name],
+                                **body(i),
+                            ),
+                            1,
+                        )
+    return f.result(), f.max_ulps
+
+
+# ---------------------------------------------------------------------------------------------
+# checks on the log's header
