@@ -10,7 +10,6 @@ import numpy as np
 import pytest
 from physics_helpers import box, scene
 
-from isaac.app import tradeoff
 from isaac.app.cli import main
 from isaac.app.tradeoff import (
     GridPoint,
@@ -22,6 +21,7 @@ from isaac.app.tradeoff import (
     sample_times,
     simulate,
 )
+from isaac.app.tradeoff.measure import _pareto
 from isaac.engine.simulation import Simulation
 from isaac.scene import PRESETS, load_scene
 
@@ -170,7 +170,7 @@ def test_resting_body_is_not_counted_as_tunneling():
 
 def test_pareto_front_keeps_only_undominated_points():
     pts = [(1.0, 5.0), (2.0, 2.0), (3.0, 3.0), (4.0, 1.0), (math.nan, 0.1)]
-    assert tradeoff._pareto(pts) == [True, True, False, True, False]
+    assert _pareto(pts) == [True, True, False, True, False]
 
 
 def test_measure_bounce_error_shrinks_with_dt_and_reference_row_is_exact():
