@@ -22,7 +22,7 @@ import numba
 import numpy as np
 from numba import types
 from numba.core import cgutils
-from numba.extending import intrinsic
+from numba.extending import intrinsic, overload
 
 from isaac.engine.diagnostics import _sums
 
@@ -252,8 +252,17 @@ def pack_layout(
     )
 
 
+def copy_bytes(dst, at, src):
+    """The bytes of array `src` (C order) into ``dst[at:]`` (a uint8 array).
+
+    This body is the reference path (``NUMBA_DISABLE_JIT=1``): numpy copies the same bytes.
+    Compiled code gets `_copy_bytes_memcpy` instead (the overload below)."""
+    nbytes = src.size * src.itemsize
+    dst[at : at + nbytes] = np.ascontiguousarray(src).reshape(-1).view(np.uint8)
+
+
 @intrinsic
-def _copy_bytes(typingctx, dst, at, src):
+def _memcpy(typingctx, dst, at, src):
     """memcpy of a C-contiguous array's bytes to ``dst[at:]`` (uint8): numba's own byte loops
     ran at 2-3 GB/s, 30x slower than memcpy for a 160 kB step, and the packed fields sit at
     unaligned offsets, out of reach of a float64 view."""
@@ -279,13 +288,24 @@ def _copy_bytes(typingctx, dst, at, src):
     return types.void(dst, at, src), codegen
 
 
+@overload(copy_bytes)
+def _copy_bytes_memcpy(dst, at, src):
+    """`copy_bytes` in compiled code: one memcpy (an intrinsic has no pure-Python form, so the
+    function above stays the reference path)."""
+
+    def impl(dst, at, src):
+        _memcpy(dst, at, src)
+
+    return impl
+
+
 @numba.njit(cache=True, nogil=True)
 def _put_values(buf, at, src):
     """src's bytes at ``buf[at:]`` (nothing when ``at`` < 0: the field is left out)."""
     if at >= 0:
         if at + src.size * src.itemsize > buf.size:  # memcpy checks nothing
             raise IndexError("pack_frame: a field runs past the buffer")
-        _copy_bytes(buf, at, np.ascontiguousarray(src))
+        copy_bytes(buf, at, np.ascontiguousarray(src))
 
 
 HEAD_BYTES = 120  # frames.FRAME_HEAD: step, time, n, m, 9 stats, 2 message lengths
