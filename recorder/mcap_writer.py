@@ -428,13 +428,31 @@ class McapLogWriter:
         os.replace(self.partial_path, self.path)
         return self.path
 
-    def abandon(self) -> None:
-        """Close the underlying file without finishing it (the .partial file stays)."""
+    def abandon(self, reason: str | None = None) -> None:
+        """Close the underlying file without finishing it (the .partial file stays, every step
+        written so far flushed; no summary or index: `isaac recover` makes the clean copy).
+
+        reason: also write the ``isaac.end`` metadata (complete: false) saying why, and sync the
+            file to disk (a writer process whose run died: recorder.writer_process).
+        """
         if not self._closed:
             self._closed = True
             try:
                 self._stop_worker()
                 self._writer.flush()
+                if reason is not None and self._error is None:
+                    self._writer.add_metadata(
+                        META_END,
+                        end_metadata(
+                            complete=False,
+                            steps=self.steps_written,
+                            last_step=self.last_step,
+                            stopped_at=None,
+                            reason=reason,
+                        ),
+                    )
+                    self._file.flush()
+                    os.fsync(self._file.fileno())
             finally:
                 self._file.close()
 

@@ -1,6 +1,6 @@
 """`Recorder`: feeds the engine's step records to the MCAP log and/or the Rerun recording.
 
-Usage (the run loop in isaac/commands.py)::
+Usage (the run loop in isaac/app/run.py)::
 
     with Recorder(sim, mcap_path="out.mcap", rrd_path="out.rrd") as rec:
         rec.write(sim.record())          # step 0: the initial state
@@ -10,7 +10,10 @@ Usage (the run loop in isaac/commands.py)::
 
 Every record is checked for NaN / infinity before anything is written: a bad value raises
 `SimulationError` naming the step and the body, and the log keeps every step before it.
-Both files are written as ``NAME.partial`` and renamed on close (clean or interrupted).
+Both files are written as ``NAME.partial`` and renamed on close (clean or interrupted). Each is
+claimed first (`recorder.outputs.claim`): refused in one line when it is not a file, when another
+run is writing it, or when its ``.partial`` holds an earlier run's steps; the claim's lock lasts
+until the file is closed, and with writer processes until the last of them has finished it.
 The recorder never re-derives physics: it writes the record's arrays and the diagnostics of them.
 """
 
@@ -21,7 +24,12 @@ import os
 from isaac.engine.records import StepRecord
 from isaac.errors import IsaacError, LogError, SimulationError
 from isaac.tuning import reuse_large_buffers
+from recorder.outputs import OutputClaim, check_distinct, claim
 from recorder.stats import check_finite, compute_stats
+
+# test hook: a FIFO that `Recorder.close` reads to its end before finishing the files, so that a
+# test can act (send a signal, start another run) at an exact moment of closing
+CLOSE_GATE_ENV = "ISAAC_TEST_CLOSE_GATE"
 
 
 class Recorder:
@@ -29,6 +37,10 @@ class Recorder:
 
     sim: the simulation (``.scene``, ``.model``); only read, never stepped here.
     mcap_path, rrd_path: output files (None to skip); written as ``PATH.partial`` until closed.
+        Either may be an `recorder.outputs.OutputClaim` made beforehand (the recorder then owns
+        it and releases it on close).
+    replace_partial: replace a ``PATH.partial`` that holds an earlier run's steps (default:
+        LogError, the file untouched).
     scene_text: the expanded scene YAML to embed; default ``isaac.scene.scene_to_yaml(sim.scene)``.
     compression: MCAP chunk compression, "none" (default: fastest), "lz4" or "zstd".
     flush_every: MCAP chunks are closed and flushed every this many steps (<= 100).
@@ -45,8 +57,8 @@ class Recorder:
     def __init__(
         self,
         sim,
-        mcap_path: str | None = None,
-        rrd_path: str | None = None,
+        mcap_path: str | OutputClaim | None = None,
+        rrd_path: str | OutputClaim | None = None,
         *,
         scene_text: str | None = None,
         compression: str = "none",
@@ -54,7 +66,34 @@ class Recorder:
         foxglove: bool = False,
         impulse_scale: float | None = None,
         offload: str = "process",
+        replace_partial: bool = False,
     ) -> None:
+        self.mcap = None
+        self.rerun = None
+        self.steps_written = 0
+        self.last_step: int | None = None
+        self.closed = False
+        self.paths: dict[str, str] = {}
+        self._claims: dict[str, OutputClaim] = {}
+        self._cpus = iter(())
+        self._restore_affinity: set[int] | None = None
+        try:
+            if offload not in ("process", "thread", "none"):
+                raise ValueError("offload must be 'process', 'thread' or 'none'")
+            self._claim(mcap_path, rrd_path, replace_partial)
+        except BaseException:
+            for c in (mcap_path, rrd_path):
+                if isinstance(c, OutputClaim):
+                    c.release(discard=True)
+            self._release_claims(discard=True)
+            raise
+        try:
+            self._start(sim, scene_text, compression, flush_every, foxglove, impulse_scale, offload)
+        except BaseException:
+            self._abandon()
+            raise
+
+    def _start(self, sim, scene_text, compression, flush_every, foxglove, impulse_scale, offload):
         # a step's messages are 100 kB and more: keep such buffers in the heap (isaac.tuning)
         reuse_large_buffers()
         self.sim = sim
@@ -68,35 +107,45 @@ class Recorder:
                 raise LogError("isaac.scene.scene_to_yaml is not available") from exc
             scene_text = scene_to_yaml(self.scene)
         self.scene_text = scene_text
-        self.mcap = None
-        self.rerun = None
-        self.steps_written = 0
-        self.last_step: int | None = None
-        self.closed = False
-        self.paths: dict[str, str] = {}
-        if offload not in ("process", "thread", "none"):
-            raise ValueError("offload must be 'process', 'thread' or 'none'")
-        self._cpus = iter(())
-        self._restore_affinity: set[int] | None = None
+        mcap, rrd = self._claims.get("mcap"), self._claims.get("rrd")
         if offload == "process":
             from recorder.writer_process import plan_cpus
 
-            plan = plan_cpus((mcap_path is not None) + (rrd_path is not None))
+            plan = plan_cpus((mcap is not None) + (rrd is not None))
             if plan is not None:
                 # the writers on CPUs of their own, this process on the others, until close
                 self._restore_affinity = os.sched_getaffinity(0)
                 os.sched_setaffinity(0, plan[0])
                 self._cpus = iter(plan[1])
-        try:
-            if mcap_path is not None:
-                self.mcap = self._mcap_writer(
-                    mcap_path, offload, compression, flush_every, foxglove, impulse_scale
-                )
-            if rrd_path is not None:
-                self.rerun = self._rerun_writer(rrd_path, offload, impulse_scale)
-        except BaseException:
-            self._abandon()
-            raise
+        if mcap is not None:
+            self.mcap = self._mcap_writer(
+                mcap.path, offload, compression, flush_every, foxglove, impulse_scale
+            )
+        if rrd is not None:
+            self.rerun = self._rerun_writer(rrd.path, offload, impulse_scale)
+
+    def _claim(self, mcap_path, rrd_path, replace_partial: bool) -> None:
+        paths = {"mcap_path": mcap_path, "rrd_path": rrd_path}
+        check_distinct(
+            {
+                k: p.path if isinstance(p, OutputClaim) else str(p)
+                for k, p in paths.items()
+                if p is not None
+            }
+        )
+        for key, kind, path in (("mcap", "mcap", mcap_path), ("rrd", "rrd", rrd_path)):
+            if isinstance(path, OutputClaim):
+                self._claims[key] = path
+            elif path is not None:
+                self._claims[key] = claim(str(path), kind, replace_partial=replace_partial)
+
+    def _release_claims(self, discard: bool = False) -> None:
+        for c in self._claims.values():
+            c.release(discard=discard)
+
+    def _lock_fd(self, key: str) -> int | None:
+        c = self._claims.get(key)
+        return None if c is None else c.fd
 
     def _mcap_writer(self, path, offload, compression, flush_every, foxglove, impulse_scale):
         from recorder.mcap_writer import McapLogWriter, build_metadata
@@ -118,6 +167,7 @@ class Recorder:
                 "mcap",
                 path,
                 cpus=next(self._cpus, None),
+                keep_fd=self._lock_fd("mcap"),
                 config={
                     "model": model_table(self.model),
                     "gravity": self.gravity,
@@ -154,6 +204,7 @@ class Recorder:
                 "rerun",
                 path,
                 cpus=next(self._cpus, None),
+                keep_fd=self._lock_fd("rrd"),
                 config={
                     "model": model_table(self.model),
                     "gravity": self.gravity,
@@ -182,6 +233,15 @@ class Recorder:
                 writer.drain(settle)
             elif settle and writer is not None and hasattr(writer, "settle"):
                 writer.settle()
+
+    def hand_over(self) -> None:
+        """Send every step written so far to the writer processes, without waiting for them to
+        take it (writes are announced to them in batches, `writer_process.NOTIFY_EVERY`): from
+        then on those steps reach the ``.partial`` file even if this process dies. A no-op for
+        in-process writers."""
+        for writer in (self.mcap, self.rerun):
+            if writer is not None and hasattr(writer, "hand_over"):
+                writer.hand_over()
 
     def write(self, record: StepRecord) -> None:
         """Record one step (in order, starting with step 0). Raises SimulationError on NaN/inf."""
@@ -215,12 +275,17 @@ class Recorder:
         complete: False when the run was interrupted or failed; then ``stopped_at`` (default: the
             last recorded step) and ``reason`` are written into the log.
         Returns {"mcap": path, "rrd": path} for the files written.
+        With ``ISAAC_TEST_CLOSE_GATE`` set (tests only), first waits on that FIFO.
         """
         if self.closed:
             return self.paths
         self.closed = True
         if not complete and stopped_at is None:
             stopped_at = self.last_step
+        gate = os.environ.get(CLOSE_GATE_ENV)
+        if gate:
+            with open(gate, "rb") as f:  # returns once the test's end of the FIFO is closed
+                f.read()
         errors = []
         for key, writer in (("mcap", self.mcap), ("rrd", self.rerun)):
             if writer is None:
@@ -231,6 +296,7 @@ class Recorder:
                 )
             except Exception as exc:  # noqa: BLE001 - close the other file, then report
                 errors.append(f"{key}: {exc}")
+        self._release_claims()  # after the writers: their processes held the locks too
         self._release_cpus()
         if errors:
             raise LogError("could not finish the log: " + "; ".join(errors))
@@ -252,6 +318,7 @@ class Recorder:
                     writer.abandon()
                 except Exception:  # noqa: BLE001 - best effort on a failed start
                     pass
+        self._release_claims(discard=True)
         self.closed = True
 
     def __enter__(self) -> Recorder:

@@ -177,6 +177,7 @@ class RerunLogWriter:
         self.impulse_scale = float(impulse_scale) if impulse_scale is not None else auto_impulse
         self.normal_length = float(normal_length) if normal_length is not None else auto_normal
         self._closed = False
+        self._sent_last: int | None = None  # the last step of the batches sent
         self._static_done = False
         self._last_labels_key: bytes | None = None
         self._moving_key: bytes | None = None
@@ -463,6 +464,7 @@ class RerunLogWriter:
             self._stats[self._stats_rows],
             self._stats_rows,
         )
+        self._sent_last = self._steps[-1]  # once per batch: where a late warning is logged
         self._reset()
         if self._queue is None:
             self._send_batch(*job)
@@ -643,7 +645,10 @@ class RerunLogWriter:
         os.replace(self.partial_path, self.path)
         return self.path
 
-    def abandon(self) -> None:
+    def abandon(self, reason: str | None = None) -> None:
+        """Write out what is buffered and close the recording without renaming it (the .partial
+        file stays). reason: also log it as a warning at the last step (a writer process whose
+        run died: recorder.writer_process)."""
         if not self._closed:
             self._closed = True
             try:
@@ -651,6 +656,10 @@ class RerunLogWriter:
                     self._send()
                 finally:
                     self._stop_worker()
+                if reason is not None and self._error is None:
+                    if self._sent_last is not None:
+                        self.rec.set_time("step", sequence=int(self._sent_last))
+                    self.rec.log("log", rr.TextLog(reason, level=rr.TextLogLevel.WARN))
                 self.rec.flush()
                 self.rec.disconnect()
             except Exception:  # noqa: BLE001 - best effort

@@ -30,8 +30,14 @@ Transport (both ends in this module):
   The parent waits only when the ring is full, on `drain` and at close.
 - the child ignores SIGINT and sits in its own process group: Ctrl-C reaches the run loop, which
   stops between steps and closes the files through ``Z``. When the parent dies without closing
-  (SIGKILL), the child sees the command pipe end, writes out every step it has received and
-  leaves the ``.partial`` file unfinished, as an in-process writer would have after a flush.
+  (SIGKILL), its replies fail (EPIPE) and are given up, not the file: the child goes on taking
+  every frame announced before the command pipe ended, then writes them out, notes in the file
+  that the run was abandoned (the MCAP ``isaac.end`` metadata, complete: false, with the
+  reason; a warning in the Rerun log) and leaves it as a flushed ``.partial`` without summary
+  or index (`isaac recover` makes the clean copy). What the parent had not announced yet (at
+  most NOTIFY_EVERY - 1 steps; none after `WriterProcess.hand_over`) is lost with it.
+- the child holds the output's lock (`recorder.outputs`, passed as ``keep_fd``) until it exits,
+  so no new run takes the file while a child whose parent died is still finishing it.
 """
 
 from __future__ import annotations
@@ -69,6 +75,9 @@ from recorder.frames import (
 # (10-30 ms on the 500-body pile) and the run goes on meanwhile: 128 frames.
 RING_FRAMES = {"mcap": 64, "rerun": 128}
 RING_MIN, RING_MAX = 4 << 20, 64 << 20
+
+# what the child writes into a file whose parent died without closing it
+ABANDONED = "abandoned: the recording process ended without closing the log"
 
 # frames are announced to the child in batches: one wake-up per NOTIFY_EVERY steps, not per
 # step (a cross-CPU wake-up measured 10-20 us on this VM); a SIGKILLed parent loses at most
@@ -146,6 +155,8 @@ class WriterProcess:
     kind: "mcap" (config: path, model, scene {name, dt}, scene_text, metadata, flush_every,
         compression, foxglove) or "rerun" (config: path, model, scene, impulse_scale).
     cpus: the CPUs the child may run on (`plan_cpus`); None: wherever the scheduler likes.
+    keep_fd: a descriptor the child keeps open, unused, until it exits: the output's lock
+        (`recorder.outputs.OutputClaim.fd`).
     """
 
     def __init__(
@@ -156,6 +167,7 @@ class WriterProcess:
         *,
         ring_bytes: int | None = None,
         cpus: set[int] | None = None,
+        keep_fd: int | None = None,
     ):
         self.path = str(path)
         self.partial_path = self.path + ".partial"
@@ -196,7 +208,7 @@ class WriterProcess:
                     str(ring_fd),
                     str(ring_bytes),
                 ],
-                pass_fds=(cmd_r, rep_w, ring_fd),
+                pass_fds=(cmd_r, rep_w, ring_fd) + (() if keep_fd is None else (keep_fd,)),
                 stdin=subprocess.DEVNULL,
                 stdout=subprocess.DEVNULL,
                 stderr=self._stderr,
@@ -365,6 +377,11 @@ class WriterProcess:
             stats,
             None if bodies_size is None else (bodies_size, contacts_size),
         )
+
+    def hand_over(self) -> None:
+        """Send the frame notices not sent yet: the child has every step written so far (it
+        writes them out even if this process dies next), without waiting for it to take them."""
+        self._notify()
 
     def wait_ready(self) -> None:
         """Block until the child has started and opened its file (start-up is ~0.3-1 s)."""
@@ -624,10 +641,20 @@ def child_main(argv: list[str]) -> int:
     ring_u8 = np.frombuffer(ring, dtype=np.uint8)
     os.close(ring_fd)
 
+    parent_gone = False
+
     def reply(kind: bytes, value: int = 0, body: bytes = b"") -> None:
+        nonlocal parent_gone
+        if parent_gone:
+            return
         data = memoryview(_REPLY.pack(kind, value) + body)
-        while data:
-            data = data[os.write(rep_fd, data) :]
+        try:
+            while data:
+                data = data[os.write(rep_fd, data) :]
+        except BrokenPipeError:
+            # the parent died: nobody reads replies any more, but the frames it announced are
+            # still in the ring and the command pipe, and they go into the file
+            parent_gone = True
 
     writer = None
     try:
@@ -637,12 +664,15 @@ def child_main(argv: list[str]) -> int:
         kind, length, _, _ = _COMMAND.unpack(head)
         if kind != b"C":
             raise LogError("writer process: expected its configuration first")
-        writer = _make_writer(pickle.loads(commands.read(length)))
+        config = commands.read(length)
+        if config is None:
+            return 0
+        writer = _make_writer(pickle.loads(config))
         reply(b"K")
         while True:
             head = commands.read(_COMMAND.size)
             if head is None:  # the parent is gone without closing: keep what arrived
-                writer.abandon()
+                writer.abandon(reason=ABANDONED)
                 return 0
             kind, a, b, c = _COMMAND.unpack(head)
             if kind == b"F":
@@ -652,6 +682,9 @@ def child_main(argv: list[str]) -> int:
                 reply(b"R", c)
             elif kind == b"I":
                 data = commands.read(a)
+                if data is None:  # the parent died while sending this frame
+                    writer.abandon(reason=ABANDONED)
+                    return 0
                 writer.write(np.frombuffer(data, dtype=np.uint8) if writer.raw else data)
             elif kind == b"S":
                 settle = getattr(writer, "settle", None)
@@ -659,17 +692,16 @@ def child_main(argv: list[str]) -> int:
                     settle()
                 reply(b"S", a)
             elif kind == b"Z":
-                args = json.loads(commands.read(a))
-                path = writer.close(**args)
+                args = commands.read(a)
+                if args is None:
+                    writer.abandon(reason=ABANDONED)
+                    return 0
+                path = writer.close(**json.loads(args))
                 body = json.dumps({"path": path}).encode()
                 reply(b"D", len(body), body)
                 return 0
             else:
                 raise LogError(f"writer process: unknown command {kind!r}")
-    except BrokenPipeError:  # the parent went away while we replied
-        if writer is not None:
-            writer.abandon()
-        return 0
     except BaseException as exc:  # noqa: BLE001 - reported to the parent in one line
         msg = str(exc) if isinstance(exc, LogError) else f"{type(exc).__name__}: {exc}"
         try:
