@@ -3,13 +3,13 @@
 from __future__ import annotations
 
 import argparse
+import os
 import signal
 import sys
 import time
-from pathlib import Path
 
 from isaac.engine import diagnostics
-from isaac.errors import IsaacError, SimulationError
+from isaac.errors import IsaacError, LogError, SimulationError
 from isaac.scene import load_scene
 
 
@@ -25,6 +25,12 @@ def register(subparsers) -> None:
     run.add_argument("--verbose", action="store_true", help="also print start-up and compile time")
     run.add_argument(
         "--profile", action="store_true", help="print time spent in each stage of the step"
+    )
+    run.add_argument(
+        "--force",
+        action="store_true",
+        help="replace an OUT.partial file left by an earlier run (default: refuse, so that "
+        "`isaac recover` can save its steps)",
     )
     run.set_defaults(func=cmd_run)
 
@@ -46,13 +52,62 @@ def cmd_check(args: argparse.Namespace) -> int:
 
 class _StopRequest:
     """Ctrl-C or SIGTERM, noted by the handler and acted on between steps, so a step and its
-    records (MCAP and Rerun alike) are always written whole before the files are closed."""
+    records (MCAP and Rerun alike) are always written whole before the files are closed.
+
+    The handler stays until the files are closed: a signal while they are being finished is
+    noted too and only reported once they are (a default handler would kill the run with the
+    files half-written, or raise KeyboardInterrupt inside the close)."""
 
     def __init__(self) -> None:
         self.signal: int | None = None
 
     def __call__(self, signum, frame) -> None:  # pragma: no cover - exercised via a subprocess
-        self.signal = signum
+        if self.signal is None:
+            self.signal = signum
+
+
+def _claim_outputs(args: argparse.Namespace) -> dict:
+    """Check and claim the output files before anything is computed: {"mcap": OutputClaim,
+    "rrd": OutputClaim} for those given. Raises LogError (one line, exit 2) for an output that
+    is the scene or the other output, whose directory cannot be made, that is not a file, that
+    another run is writing, or whose .partial holds an earlier run's steps (without --force)."""
+    outputs = {label: out for label, out in (("--mcap", args.mcap), ("--rrd", args.rrd)) if out}
+    if not outputs:
+        return {}
+    from recorder.outputs import check_distinct, claim
+
+    check_distinct(outputs, {"scene file": args.scene})
+    for out in outputs.values():
+        _make_parent(out)
+    claims = {}
+    try:
+        for kind, label in (("mcap", "--mcap"), ("rrd", "--rrd")):
+            if label in outputs:
+                claims[kind] = claim(
+                    outputs[label],
+                    kind,
+                    replace_partial=args.force,
+                    force_hint="pass --force to replace it",
+                )
+    except BaseException:
+        for c in claims.values():
+            c.release(discard=True)
+        raise
+    return claims
+
+
+def _make_parent(out: str) -> None:
+    """Create the directory of output ``out`` (and its parents); LogError in one line if not."""
+    parent = os.path.dirname(os.path.abspath(out))
+    existing = parent
+    while not os.path.lexists(existing):
+        existing = os.path.dirname(existing)
+    if not os.path.isdir(existing):
+        raise LogError(f"cannot write {out}: {existing} is not a directory")
+    try:
+        os.makedirs(parent, exist_ok=True)
+    except OSError as exc:
+        raise LogError(f"cannot write {out}: cannot create {parent}: {exc.strerror}") from exc
 
 
 def cmd_run(args: argparse.Namespace) -> int:
@@ -65,39 +120,43 @@ def cmd_run(args: argparse.Namespace) -> int:
     steps = scene.world.steps if args.steps is None else args.steps
     if steps < 0:
         raise IsaacError(f"--steps must be >= 0, got {steps}")
-    sim = Simulation(scene)
+    claims = _claim_outputs(args)
+    try:
+        sim = Simulation(scene)
+    except BaseException:
+        for c in claims.values():
+            c.release(discard=True)
+        raise
     if args.profile:
         from isaac.app.profile import enable_profiling
 
         profiler = enable_profiling()
     recorder = None
-    if args.mcap or args.rrd:
-        from recorder import Recorder
-
-        for out in (args.mcap, args.rrd):
-            if out:
-                Path(out).parent.mkdir(parents=True, exist_ok=True)
-        recorder = Recorder(sim, mcap_path=args.mcap, rrd_path=args.rrd)
-
-    first = sim.record()
-    if recorder:
-        recorder.write(first)
+    first = last = sim.record()
     energy_start = _energy(sim, first)
     contacts_seen = 0
     max_depth = 0.0
-    last = first
     progress = None
-    if not args.quiet and sys.stderr.isatty():
-        from tqdm import tqdm
-
-        progress = tqdm(total=steps, unit="step", desc=scene.name, leave=False)
     stop = _StopRequest()
+    # handled from before the files are opened until they are closed (see _StopRequest)
     previous = {sig: signal.signal(sig, stop) for sig in (signal.SIGTERM, signal.SIGINT)}
     stopped = None
+    signal_in_close = None
     finished = False
     first_step_at = None
-    loop_start = time.perf_counter()
+    loop_start = loop_end = time.perf_counter()
     try:
+        if claims:
+            from recorder import Recorder
+
+            recorder = Recorder(sim, mcap_path=claims.get("mcap"), rrd_path=claims.get("rrd"))
+            claims = {}  # the recorder owns them now
+            recorder.write(first)
+        if not args.quiet and sys.stderr.isatty():
+            from tqdm import tqdm
+
+            progress = tqdm(total=steps, unit="step", desc=scene.name, leave=False)
+        loop_start = time.perf_counter()
         for _ in range(steps):
             if stop.signal is not None:
                 name = signal.Signals(stop.signal).name
@@ -119,16 +178,22 @@ def cmd_run(args: argparse.Namespace) -> int:
         stopped = ("error", str(exc))
     finally:
         loop_end = time.perf_counter()
-        for sig, handler in previous.items():
-            signal.signal(sig, handler)
-        if progress:
-            progress.close()
-        if recorder:
-            if finished:
-                recorder.close(complete=True)
-            else:
-                reason = stopped[1] if stopped else "the run failed"
-                recorder.close(complete=False, stopped_at=sim.step_index, reason=reason)
+        try:
+            if progress:
+                progress.close()
+            for c in claims.values():  # the recorder never started
+                c.release(discard=True)
+            if recorder:
+                if finished:
+                    recorder.close(complete=True)
+                else:
+                    reason = stopped[1] if stopped else "the run failed"
+                    recorder.close(complete=False, stopped_at=sim.step_index, reason=reason)
+                if stopped is None:  # a signal the loop did not act on: during the close
+                    signal_in_close = stop.signal
+        finally:
+            for sig, handler in previous.items():
+                signal.signal(sig, handler)
     finished_files = time.perf_counter() - loop_end
     taken = last.step - first.step
     # the first step also loads (or compiles) the kernels: the rate is measured after it, up to
@@ -165,6 +230,14 @@ def cmd_run(args: argparse.Namespace) -> int:
     for label, out in (("MCAP log", args.mcap), ("Rerun recording", args.rrd)):
         if out:
             print(f"  {label}: {out}")
+    if stopped is None and signal_in_close is not None:
+        files = ", ".join(out for out in (args.mcap, args.rrd) if out)
+        print(
+            f"isaac run: interrupted ({signal.Signals(signal_in_close).name}) while finishing "
+            f"the files; they were finished first and are complete: {files}",
+            file=sys.stderr,
+        )
+        return 130
     if stopped:
         kind, message = stopped
         print(
