@@ -183,10 +183,13 @@ def mcap_steps(path: str) -> int | None:
     ISAAC log. A step counts when its ``/stats`` message is there: the last of its messages."""
     from recorder.reader import LogReader
 
+    steps = 0
     try:
-        return sum(1 for _ in LogReader(path).messages("/stats"))
-    except LogError:
-        return None
+        for _ in LogReader(path).messages("/stats"):
+            steps += 1
+    except Exception:  # noqa: BLE001 - not a log, or damaged after the steps read so far
+        return steps or None
+    return steps
 
 
 def rrd_steps(path: str) -> int | None:

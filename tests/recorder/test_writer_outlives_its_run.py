@@ -136,6 +136,7 @@ def test_an_mcap_writer_whose_run_died_writes_every_step_it_was_handed(tmp_path)
         claim(str(path), "mcap")
 
 
+@pytest.mark.slow  # 4-7 s (Rerun's start-up); the MCAP test above proves the same child loop
 def test_a_rerun_writer_whose_run_died_writes_every_step_it_was_handed(tmp_path):
     from rerun.chunk import RrdReader
 
