@@ -3,7 +3,9 @@
 Holds the YAML reader with line marks (`reader`), the limits every value is checked against
 (`limits`), world settings and fidelity presets (`settings`), the validated scene and bodies
 (`spec`), polygons and their mass properties (`polygon`), the generators that expand at load
-time (`generators`), loading (`loader`) and the round trip back to YAML (`writer`).
+time (`generators`), the checks every expanded body passes (`checks`), loading (`loader`), the
+round trip back to YAML (`writer`) and its fast reader (`fast_reader`), and the warnings about
+a valid scene the engine is not measured to handle (`warnings`).
 
 May import: the standard library, numpy, PyYAML and `isaac.errors`. Never numba, the engine,
 the recorder, replay or the app: a scene is plain data that the engine is built from.

@@ -42,6 +42,17 @@ class GeneratorError(ValueError):
         super().__init__(f"{key}: {what}")
 
 
+def pile_suffix_length(count: int) -> int:
+    """Characters a pile of `count` bodies adds to its prefix in its longest name."""
+    return max(len("/floor"), len("/right"), len(f"/{count}"))
+
+
+def pyramid_suffix_length(rows: int, ground: bool) -> int:
+    """Characters a pyramid of `rows` rows adds to its prefix in its longest name."""
+    longest = max(len(f"/{row}/{rows - row + 1}") for row in range(1, rows + 1))
+    return max(longest, len("/ground")) if ground else longest
+
+
 def _vertex_tuple(vertices: np.ndarray) -> tuple[tuple[float, float], ...]:
     return tuple((float(x), float(y)) for x, y in vertices)
 

@@ -7,14 +7,15 @@ Loading: YAML text -> node tree with line marks (isaac.scene.reader) -> checked 
 from __future__ import annotations
 
 import dataclasses
+import functools
 import gc
 import math
+import os
+import stat
 from pathlib import Path
 
-import yaml
-
 from isaac.errors import SceneError
-from isaac.scene import generators, polygon
+from isaac.scene import checks, fast_reader, generators, polygon
 from isaac.scene.limits import (
     MAX_BODIES,
     MAX_COORDINATE,
@@ -22,6 +23,8 @@ from isaac.scene.limits import (
     MAX_FRICTION,
     MAX_GRAVITY,
     MAX_ITERATIONS,
+    MAX_NAME_LENGTH,
+    MAX_PILE_COUNT,
     MAX_PYRAMID_ROWS,
     MAX_SCENE_BYTES,
     MAX_SIZE,
@@ -30,9 +33,11 @@ from isaac.scene.limits import (
     MAX_SUBSTEPS,
     MAX_TIME,
     MAX_VERTICES,
+    MAX_YAML_BYTES,
     MIN_SIZE,
 )
 from isaac.scene.reader import (
+    MappingNode,
     Reader,
     compose,
     describe,
@@ -40,6 +45,7 @@ from isaac.scene.reader import (
     line_of,
     optional,
     scalar_or_none,
+    shown,
 )
 from isaac.scene.settings import DEFAULT_PRESET, PRESETS, WorldSettings
 from isaac.scene.spec import BodySpec, Scene
@@ -121,6 +127,12 @@ def _vertices_tuple(v) -> tuple[tuple[float, float], ...]:
     return tuple((float(x), float(y)) for x, y in v)
 
 
+@functools.lru_cache(maxsize=256)
+def _box(width: float, height: float) -> tuple[tuple[float, float], ...]:
+    # one tuple for the many bodies of one box size: a 100,000-box scene holds one, not 100,000
+    return _vertices_tuple(polygon.box_vertices(width, height))
+
+
 def _read_shape(r: Reader, node, path: str) -> tuple[tuple[float, float], ...]:
     m = r.mapping(node, path, ("box", "polygon", "regular"))
     if len(m) != 1:
@@ -128,8 +140,7 @@ def _read_shape(r: Reader, node, path: str) -> tuple[tuple[float, float], ...]:
     kind, (_, value) = next(iter(m.items()))
     path = join_path(path, kind)
     if kind == "box":
-        width, height = r.pair(value, path, MIN_SIZE, MAX_SIZE)
-        return _vertices_tuple(polygon.box_vertices(width, height))
+        return _box(*r.pair(value, path, MIN_SIZE, MAX_SIZE))
     if kind == "regular":
         p = r.mapping(value, path, ("sides", "radius", "phase"))
         for key in ("sides", "radius"):
@@ -233,26 +244,52 @@ def _require(r: Reader, m: dict, keys, node, path: str) -> None:
             raise r.fail(f"missing key {key!r}", node, path)
 
 
+def _prefix(r: Reader, m: dict, path: str, default: str, suffix: int, pattern: str) -> str:
+    """The generator's `name`: its bodies are named PREFIX + a suffix of up to `suffix`
+    characters, and every name must fit MAX_NAME_LENGTH."""
+    if "name" not in m:
+        return default
+    node = m["name"][1]
+    name = r.name(node, join_path(path, "name"))
+    if len(name) + suffix > MAX_NAME_LENGTH:
+        raise r.fail(
+            f"a name of {len(name)} characters is too long here: this generator names its "
+            f"bodies {pattern}, adding up to {suffix} characters, and a name has at most "
+            f"{MAX_NAME_LENGTH} (use at most {MAX_NAME_LENGTH - suffix})",
+            node,
+            join_path(path, "name"),
+        )
+    return name
+
+
 def _read_pyramid(r: Reader, node, path: str) -> tuple[dict, int]:
     m = r.mapping(node, path, _PYRAMID_KEYS)
     _require(r, m, ("rows", "box"), node, path)
     rows = r.integer(m["rows"][1], join_path(path, "rows"), 1, MAX_PYRAMID_ROWS)
+    ground = optional(r.boolean, m, "ground", path, True)
     options = dict(
         rows=rows,
         box=r.pair(m["box"][1], join_path(path, "box"), MIN_SIZE, MAX_SIZE),
         base=optional(r.pair, m, "base", path, (0.0, 0.0), -MAX_COORDINATE, MAX_COORDINATE),
         spacing=optional(r.number, m, "spacing", path, 0.0, 0.0, MAX_SIZE),
-        name=optional(r.name, m, "name", path, "pyramid"),
-        ground=optional(r.boolean, m, "ground", path, True),
+        name=_prefix(
+            r,
+            m,
+            path,
+            "pyramid",
+            generators.pyramid_suffix_length(rows, ground),
+            "NAME/ROW/COLUMN and NAME/ground",
+        ),
+        ground=ground,
         **_material(r, m, path),
     )
-    return options, rows * (rows + 1) // 2 + 1
+    return options, rows * (rows + 1) // 2 + (1 if ground else 0)
 
 
 def _read_pile(r: Reader, node, path: str) -> tuple[dict, int]:
     m = r.mapping(node, path, _PILE_KEYS)
     _require(r, m, ("count",), node, path)
-    count = r.integer(m["count"][1], join_path(path, "count"), 1, MAX_BODIES)
+    count = r.integer(m["count"][1], join_path(path, "count"), 1, MAX_PILE_COUNT)
     sides = (3, 8)
     if "sides" in m:
         sides_path = join_path(path, "sides")
@@ -272,9 +309,12 @@ def _read_pile(r: Reader, node, path: str) -> tuple[dict, int]:
     if "container" in m:
         cpath = join_path(path, "container")
         c = r.mapping(m["container"][1], cpath, _CONTAINER_KEYS)
+        height = None  # null or left out: just tall enough for the starting grid
+        if "height" in c and scalar_or_none(c["height"][1]) is not None:
+            height = r.number(c["height"][1], join_path(cpath, "height"), MIN_SIZE, MAX_SIZE)
         container = dict(
             width=optional(r.number, c, "width", cpath, 10.0, MIN_SIZE, MAX_SIZE),
-            height=optional(r.number, c, "height", cpath, None, MIN_SIZE, MAX_COORDINATE),
+            height=height,
             thickness=optional(r.number, c, "thickness", cpath, 0.5, MIN_SIZE, MAX_SIZE),
             position=optional(
                 r.pair, c, "position", cpath, (0.0, 0.0), -MAX_COORDINATE, MAX_COORDINATE
@@ -285,14 +325,22 @@ def _read_pile(r: Reader, node, path: str) -> tuple[dict, int]:
         seed=optional(r.integer, m, "seed", path, 0, 0, 2**63 - 1),
         sides=sides,
         radius=radius,
-        name=optional(r.name, m, "name", path, "pile"),
+        name=_prefix(
+            r,
+            m,
+            path,
+            "pile",
+            generators.pile_suffix_length(count),
+            "NAME/1 .. NAME/COUNT, NAME/floor, NAME/left and NAME/right",
+        ),
         **container,
         **_material(r, m, path),
     )
     return options, count + 3
 
 
-def _expand_generator(r: Reader, node, path: str, room: int) -> list[BodySpec]:
+def _expand_generator(r: Reader, node, path: str, room: int):
+    """(kind, options node, key path, bodies) of generator item `node`."""
     m = r.mapping(node, path, ("pyramid", "pile"))
     if len(m) != 1:
         raise r.fail("each generator has exactly one key: pyramid or pile", node, path)
@@ -308,14 +356,24 @@ def _expand_generator(r: Reader, node, path: str, room: int) -> list[BodySpec]:
             path,
         )
     try:
-        return getattr(generators, kind)(**options)
+        bodies = getattr(generators, kind)(**options)
     except generators.GeneratorError as exc:
-        key_node = options_node
-        head = exc.key.split(".")[0]
-        options_map = r.mapping(options_node, path, None)
-        if head in options_map:
-            key_node = options_map[head][1]
+        key_node = _option_node(r, options_node, path, exc.key) or options_node
         raise r.fail(exc.what, key_node, join_path(path, exc.key)) from None
+    return kind, options_node, path, options["name"], bodies
+
+
+def _option_node(r: Reader, options_node, path: str, key: str):
+    """The node of option `key` ("container.height") if the scene gives it, else None."""
+    node = options_node
+    for part in key.split("."):
+        if not isinstance(node, MappingNode):
+            return None
+        m = r.mapping(node, path, None)
+        if part not in m:
+            return None
+        node = m[part][1]
+    return node
 
 
 # --- scene ----------------------------------------------------------------------------------
@@ -327,14 +385,23 @@ def load_scene(path) -> Scene:
     """Read, check and expand the scene file at `path` (YAML, UTF-8; docs/scene-format.md).
 
     The scene's name defaults to the file's stem. Raises SceneError (one line:
-    ``FILE:LINE: KEY.PATH: what is wrong``) for anything unreadable or invalid.
+    ``FILE:LINE: KEY.PATH: what is wrong``) for anything unreadable or invalid, including a
+    path that is not a regular file (a FIFO, a device, a directory), which is refused before it
+    is opened: reading a FIFO would wait for a writer forever.
     """
     source = str(path)
+    p = Path(path)
     try:
-        p = Path(path)
-        if p.is_dir():
-            raise SceneError("is a directory, not a scene file", source=source)
-        with open(p, "rb") as f:
+        kind = _not_a_file(os.stat(p).st_mode)
+        if kind:
+            raise SceneError(f"is {kind}, not a scene file", source=source)
+        # O_NONBLOCK: should the path have become a FIFO since the stat, opening it does not
+        # wait for a writer, and fstat below refuses it.
+        fd = os.open(p, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0))
+        with open(fd, "rb") as f:
+            kind = _not_a_file(os.fstat(f.fileno()).st_mode)
+            if kind:
+                raise SceneError(f"is {kind}, not a scene file", source=source)
             data = f.read(MAX_SCENE_BYTES + 1)
     except SceneError:
         raise
@@ -353,21 +420,48 @@ def load_scene(path) -> Scene:
             source=source,
             line=line,
         ) from None
+    del data
     return load_scene_text(text, source=source, default_name=p.stem)
+
+
+def _not_a_file(mode: int) -> str | None:
+    if stat.S_ISREG(mode):
+        return None
+    if stat.S_ISDIR(mode):
+        return "a directory"
+    if stat.S_ISFIFO(mode):
+        return "a FIFO (named pipe)"
+    if stat.S_ISSOCK(mode):
+        return "a socket"
+    if stat.S_ISCHR(mode) or stat.S_ISBLK(mode):
+        return "a device"
+    return "not a regular file"
 
 
 def load_scene_text(text: str, source: str = "<text>", *, default_name: str | None = None) -> Scene:
     """Check and expand scene YAML `text`; `source` names it in messages and in `Scene.source`.
 
     The name defaults to `default_name`, else "scene". Raises SceneError like `load_scene`.
+    Text in the exact form `scene_to_yaml` writes (a log's scene) is read line by line without a
+    YAML node tree (isaac.scene.fast_reader), to the same Scene; any other text goes through
+    the YAML reader, bounded by MAX_YAML_BYTES and the node limits of isaac.scene.limits.
     """
     if len(text) > MAX_SCENE_BYTES:
         raise SceneError(f"the text is longer than {MAX_SCENE_BYTES} characters", source=source)
-    # the node tree holds no cycles, yet its ~30 nodes per body make the cyclic garbage collector
-    # run over and over while it grows: pausing it halves the load time of a large scene.
+    # the node tree holds no cycles, yet its many nodes make the cyclic garbage collector run
+    # over and over while it grows: pausing it halves the load time of a large scene.
     collecting = gc.isenabled()
     gc.disable()
     try:
+        scene = fast_reader.read(text, source, default_name or "scene", _read_head, _body_alone)
+        if scene is not None:
+            return scene
+        if len(text) > MAX_YAML_BYTES:
+            raise SceneError(
+                f"the text is longer than {MAX_YAML_BYTES} characters (the limit for YAML not "
+                "written by scene_to_yaml)",
+                source=source,
+            )
         root = compose(text, source)
         if root is None:
             raise SceneError(
@@ -383,19 +477,36 @@ def load_scene_text(text: str, source: str = "<text>", *, default_name: str | No
             gc.enable()
 
 
-def _read_scene(r: Reader, root, default_name: str) -> Scene:
+def _read_head(r: Reader, root, default_name: str):
+    """(mapping, name, world, analytic) of the scene mapping `root`."""
     m = r.mapping(root, "", _SCENE_KEYS)
     name = optional(r.name, m, "name", "", default_name)
     world_node = m["world"][1] if "world" in m else None
     world = _read_world(r, None if scalar_or_none(world_node) is None else world_node)
+    analytic = None
+    if "analytic" in m and scalar_or_none(m["analytic"][1]) is not None:
+        if not isinstance(m["analytic"][1], MappingNode):
+            raise r.fail(
+                f"expected a mapping, got {describe(m['analytic'][1])}",
+                m["analytic"][1],
+                "analytic",
+            )
+        analytic = r.plain(m["analytic"][1], "analytic")
+    return m, name, world, analytic
+
+
+def _read_scene(r: Reader, root, default_name: str) -> Scene:
+    m, name, world, analytic = _read_head(r, root, default_name)
     bodies: list[BodySpec] = []
     origin: dict[str, tuple[str, int]] = {}  # name -> (key path, line) where it was made
+    explicit = []  # (item node, key path) of each body of `bodies:`
+    made = []  # (first body, end, kind, options node, key path, name prefix) of each generator
 
     def add(spec: BodySpec, path: str, node) -> None:
         if spec.name in origin:
             first_path, first_line = origin[spec.name]
             raise r.fail(
-                f"duplicate body name {spec.name!r} (already used by {first_path} at "
+                f"duplicate body name {shown(spec.name)} (already used by {first_path} at "
                 f"line {first_line})",
                 node,
                 path,
@@ -409,26 +520,93 @@ def _read_scene(r: Reader, root, default_name: str) -> Scene:
             path = f"bodies[{i}]"
             spec = _read_body(r, item, path, i)
             name_node = item
-            if isinstance(item, yaml.MappingNode):
+            if isinstance(item, MappingNode):
                 for key_node, value_node in item.value:
                     if key_node.value == "name":
                         name_node = value_node
             add(spec, join_path(path, "name") if name_node is not item else path, name_node)
+            explicit.append((item, path))
     if "generators" in m and scalar_or_none(m["generators"][1]) is not None:
         items = r.sequence(m["generators"][1], "generators")
         for i, item in enumerate(items):
             path = f"generators[{i}]"
-            for spec in _expand_generator(r, item, path, MAX_BODIES - len(bodies)):
+            first = len(bodies)
+            kind, options_node, gen_path, prefix, specs = _expand_generator(
+                r, item, path, MAX_BODIES - len(bodies)
+            )
+            for spec in specs:
                 add(spec, path, item)
+            made.append((first, len(bodies), kind, options_node, gen_path, prefix))
     if not bodies:
         raise r.fail("the scene has no bodies (give `bodies:` or `generators:`)", root)
-    analytic = None
-    if "analytic" in m and scalar_or_none(m["analytic"][1]) is not None:
-        if not isinstance(m["analytic"][1], yaml.MappingNode):
-            raise r.fail(
-                f"expected a mapping, got {describe(m['analytic'][1])}",
-                m["analytic"][1],
-                "analytic",
-            )
-        analytic = r.plain(m["analytic"][1], "analytic")
+    problem = checks.first_problem(bodies)
+    if problem is not None:
+        raise _refusal(r, problem, bodies, explicit, made)
     return Scene(name=name, world=world, bodies=tuple(bodies), source=r.source, analytic=analytic)
+
+
+def _body_alone(r: Reader, text: str, line: int, index: int) -> SceneError | None:
+    """The error the YAML reader finds in one body item `text` (`  - name: ...` lines starting
+    at `line`) read as body `index`, or None if it finds none."""
+    try:
+        root = compose("\n" * (line - 2) + "bodies:\n" + text, r.source)
+        items = r.sequence(r.mapping(root, "", ("bodies",))["bodies"][1], "bodies", min_len=1)
+        path = f"bodies[{index}]"
+        body = _read_body(r, items[0], path, index)
+    except SceneError as exc:
+        return exc
+    problem = checks.first_problem([body])
+    if problem is None:
+        return None
+    return _refusal(r, problem, [body], [(items[0], path)], [])
+
+
+# Which option of a generator decides a field of a body it makes, by the body's role (the
+# naming conventions of isaac.scene.generators): (kind, role, field) -> option key; role "*"
+# is every other body (the pile's polygons, the pyramid's boxes). A key the scene does not give
+# falls back to the next in the tuple.
+_OPTION_BEHIND = {
+    ("pile", "floor", "vertices"): ("container.width", "container.thickness", "container"),
+    ("pile", "left", "vertices"): ("container.height", "count"),
+    ("pile", "right", "vertices"): ("container.height", "count"),
+    ("pile", "*", "vertices"): ("radius", "sides"),
+    ("pile", "*", "position"): ("container.position", "count"),
+    ("pyramid", "*", "vertices"): ("box",),
+    ("pyramid", "*", "position"): ("base", "rows"),
+    ("pile", "*", "mass"): ("density", "radius"),
+    ("pyramid", "*", "mass"): ("density", "box"),
+    ("pile", "*", "name"): ("name",),
+    ("pyramid", "*", "name"): ("name",),
+}
+
+
+def _refusal(r: Reader, problem: checks.Problem, bodies, explicit, made) -> SceneError:
+    """The SceneError for `problem`, at the scene key that made the body."""
+    i, field, what = problem
+    body = bodies[i]
+    if i < len(explicit):
+        item, path = explicit[i]
+        m = r.mapping(item, path, None)
+        shape = r.mapping(m["shape"][1], path, None)
+        kind = next(iter(shape))
+        shape_at = (join_path(join_path(path, "shape"), kind), shape[kind][1])
+        if field == "vertices":
+            key_path, node = shape_at
+        elif field == "mass":
+            key_path, node = (
+                (join_path(path, "density"), m["density"][1]) if "density" in m else shape_at
+            )
+        elif field in m:
+            key_path, node = join_path(path, field), m[field][1]
+        else:
+            key_path, node = path, item
+        return r.fail(what, node, key_path)
+    first, end, kind, options_node, path, prefix = next(g for g in made if g[0] <= i < g[1])
+    role = body.name[len(prefix) + 1 :]
+    keys = _OPTION_BEHIND.get((kind, role, field)) or _OPTION_BEHIND.get((kind, "*", field), ())
+    what = f"the body {shown(body.name)} it makes: {what}"
+    for key in keys:
+        node = _option_node(r, options_node, path, key)
+        if node is not None:
+            return r.fail(what, node, join_path(path, key))
+    return r.fail(what, options_node, path)

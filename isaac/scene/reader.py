@@ -1,12 +1,17 @@
 """Reading YAML with line marks: a composer that refuses what a scene may not hold, scalars read
 by our own rules, and `Reader`, typed access whose every failure names file, line and key path.
 
+We never let PyYAML construct Python objects, nor even build its node tree: we take the parser's
+events (libyaml's when available) and compose our own small nodes (value, line, style), refusing
+anchors, aliases and explicit tags and stopping at the node, list and nesting limits of
+isaac.scene.limits, so a hostile document is refused before it costs much time or memory. Then
+we read every scalar ourselves. That is how we get line numbers in every message, refuse
+duplicate keys (PyYAML keeps the last one silently), read `1e3` as a number (YAML 1.1 reads it
+as a string) and keep `off`/`no`/`yes` as strings (YAML 1.1 reads them as booleans; only
+`true`/`false` are booleans here).
 
-We never let PyYAML construct Python objects: we compose the node tree with a SafeLoader that
-refuses anchors, aliases and explicit tags, then read every scalar ourselves. That is how we get
-line numbers in every message, refuse duplicate keys (PyYAML keeps the last one silently), read
-`1e3` as a number (YAML 1.1 reads it as a string) and keep `off`/`no`/`yes` as strings (YAML 1.1
-reads them as booleans; only `true`/`false` are booleans here).
+Every value or key a message quotes is cut to MAX_QUOTED characters (`shown`), so a 1 MB value
+gives a short line.
 """
 
 from __future__ import annotations
@@ -18,7 +23,16 @@ import re
 import yaml
 
 from isaac.errors import SceneError
-from isaac.scene.limits import MAX_NAME_LENGTH
+from isaac.scene.limits import (
+    MAX_BODY_NODES,
+    MAX_LIST_ITEMS,
+    MAX_NAME_LENGTH,
+    MAX_NESTING,
+    MAX_QUOTED,
+    MAX_SECTION_NODES,
+    MAX_VERTICES,
+    MAX_YAML_NODES,
+)
 
 _INT_RE = re.compile(r"[-+]?[0-9]+\Z")
 _FLOAT_RE = re.compile(r"[-+]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][-+]?[0-9]+)?\Z")
@@ -26,74 +40,198 @@ _NONFINITE_RE = re.compile(r"[-+]?\.?(?:nan|inf|infinity)\Z", re.IGNORECASE)
 _NULLS = ("null", "~", "")
 
 
-class _RefuseAliases(yaml.composer.Composer):
-    """A composer that refuses anchors, aliases and explicit tags.
-
-    Aliases are refused outright rather than bounded: a "billion laughs" document composes in
-    milliseconds but walking the result took 16.7 s and 1.6 GiB when measured.
-    """
-
-    def compose_node(self, parent, index):
-        event = self.peek_event()
-        if isinstance(event, yaml.AliasEvent):
-            raise Refused("YAML aliases (*name) are not allowed in a scene", event.start_mark)
-        if getattr(event, "anchor", None) is not None:
-            raise Refused("YAML anchors (&name) are not allowed in a scene", event.start_mark)
-        if getattr(event, "tag", None) not in (None, "!"):
-            raise Refused(f"YAML tags ({event.tag}) are not allowed in a scene", event.start_mark)
-        return super().compose_node(parent, index)
-
-    def resolve(self, kind, value, implicit):
-        # we read scalars ourselves (scalar), so PyYAML's implicit typing is skipped: it is a
-        # third of the load time of a large scene.
-        if kind is yaml.ScalarNode:
-            return "tag:yaml.org,2002:str"
-        if kind is yaml.SequenceNode:
-            return "tag:yaml.org,2002:seq"
-        return "tag:yaml.org,2002:map"
+# --- nodes ----------------------------------------------------------------------------------
 
 
-class _NoAliasLoader(_RefuseAliases, yaml.SafeLoader):
-    """Pure-Python scanner and parser, our composer."""
+class ScalarNode:
+    """A scalar as written: `value` the text, `line` 1-based, `style` None or "" when plain,
+    else the quote or block indicator."""
+
+    __slots__ = ("value", "line", "style")
+
+    def __init__(self, value: str, line: int, style) -> None:
+        self.value = value
+        self.line = line
+        self.style = style
+
+
+class SequenceNode:
+    """A list: `value` the item nodes in order, `line` 1-based."""
+
+    __slots__ = ("value", "line")
+
+    def __init__(self, line: int) -> None:
+        self.value: list = []
+        self.line = line
+
+
+class MappingNode:
+    """A mapping: `value` the (key node, value node) pairs in document order, `line` 1-based."""
+
+    __slots__ = ("value", "line")
+
+    def __init__(self, line: int) -> None:
+        self.value: list = []  # while composing: key, value, key, value, ...
+        self.line = line
+
+
+class _NoAliasLoader(yaml.SafeLoader):
+    """PyYAML's pure-Python reader, scanner and parser; only its events are used."""
 
 
 if getattr(yaml, "__with_libyaml__", False):
-
-    class _FastNoAliasLoader(
-        _RefuseAliases, yaml._yaml.CParser, yaml.constructor.SafeConstructor, yaml.resolver.Resolver
-    ):
-        """libyaml's scanner and parser (about 4x faster on a large expanded scene), our
-        composer: same nodes, same marks, same refusals."""
-
-        def __init__(self, stream) -> None:
-            yaml._yaml.CParser.__init__(self, stream)
-            _RefuseAliases.__init__(self)
-            yaml.constructor.SafeConstructor.__init__(self)
-            yaml.resolver.Resolver.__init__(self)
-
-    _LOADER = _FastNoAliasLoader
-else:
+    _LOADER = yaml._yaml.CParser  # libyaml: the same events, about 4x faster
+else:  # pragma: no cover - libyaml ships with PyYAML's wheels
     _LOADER = _NoAliasLoader
 
 
 class Refused(Exception):
-    def __init__(self, what: str, mark) -> None:
+    def __init__(self, what: str, line: int | None) -> None:
         self.what = what
-        self.mark = mark
+        self.line = line
+
+
+def _compose(parser):
+    """The root node of the one document `parser` yields (None for an empty stream).
+
+    Bounds, each refused as soon as it is passed: MAX_YAML_NODES nodes in all, of which at most
+    MAX_SECTION_NODES under any top-level key but `bodies` (or in all, if the root is not a
+    mapping) and MAX_BODY_NODES in any one item of `bodies`; MAX_LIST_ITEMS items in a list;
+    MAX_NESTING open lists and mappings.
+    """
+    get = parser.get_event
+    get()  # StreamStartEvent
+    event = get()
+    if isinstance(event, yaml.StreamEndEvent):
+        return None
+    scalar_event = yaml.ScalarEvent
+    sequence_start = yaml.SequenceStartEvent
+    mapping_start = yaml.MappingStartEvent
+    mapping_end = yaml.MappingEndEvent
+    ends = (yaml.SequenceEndEvent, mapping_end)
+    open_nodes: list = []  # the sequences and mappings being composed, outermost first
+    count = 0
+    section, section_count, section_limit = "", 0, MAX_SECTION_NODES
+    in_bodies, item_count, item_line = False, 0, 0
+    root = None
+    while root is None:
+        event = get()
+        kind = type(event)
+        if kind in ends:
+            node = open_nodes.pop()
+            if kind is mapping_end:
+                flat = node.value
+                node.value = list(zip(flat[0::2], flat[1::2]))
+            if not open_nodes:
+                root = node
+            continue
+        if kind is yaml.AliasEvent:
+            raise Refused("YAML aliases (*name) are not allowed in a scene", _line(event))
+        if event.anchor is not None:
+            raise Refused("YAML anchors (&name) are not allowed in a scene", _line(event))
+        if event.tag not in (None, "!"):
+            raise Refused(
+                f"YAML tags ({shown(event.tag)}) are not allowed in a scene", _line(event)
+            )
+        line = event.start_mark.line + 1
+        count += 1
+        if count > MAX_YAML_NODES:
+            raise Refused(
+                f"the document has more than {MAX_YAML_NODES} YAML nodes (values, lists and "
+                "mappings); write bigger scenes with generators, or as scene_to_yaml writes them",
+                line,
+            )
+        depth = len(open_nodes)
+        if depth == 1 and type(open_nodes[0]) is MappingNode:
+            keys = open_nodes[0].value
+            if len(keys) % 2:  # the value of a top-level key: a new section
+                key = keys[-1]
+                section = key.value if type(key) is ScalarNode else "?"
+                in_bodies = section == "bodies"
+                section_count = 0
+                section_limit = MAX_YAML_NODES if in_bodies else MAX_SECTION_NODES
+            else:  # a top-level key
+                in_bodies, section = False, ""
+        elif depth >= 2 and in_bodies:
+            if depth == 2:
+                item_count, item_line = 0, line
+            item_count += 1
+            if item_count > MAX_BODY_NODES:
+                raise Refused(
+                    f"this body has more than {MAX_BODY_NODES} YAML nodes (one of "
+                    f"{MAX_VERTICES} vertices with every key has {MAX_VERTICES * 3 + 31})",
+                    item_line,
+                )
+        section_count += 1
+        if section_count > section_limit:
+            where = f"`{shown(section)[1:-1]}:`" if section else "the document"
+            raise Refused(f"{where} holds more than {section_limit} YAML nodes", line)
+        if kind is scalar_event:
+            node = ScalarNode(event.value, line, event.style)
+        elif kind is sequence_start:
+            node = SequenceNode(line)
+        elif kind is mapping_start:
+            node = MappingNode(line)
+        else:  # pragma: no cover - the parser yields nothing else inside a document
+            raise AssertionError(f"unexpected YAML event {event}")
+        if depth:
+            parent = open_nodes[-1]
+            items = parent.value
+            items.append(node)
+            if len(items) > MAX_LIST_ITEMS and type(parent) is SequenceNode:
+                raise Refused(
+                    f"the list that starts here has more than {MAX_LIST_ITEMS} items",
+                    parent.line,
+                )
+        elif kind is scalar_event:
+            root = node
+        if kind is not scalar_event:
+            open_nodes.append(node)
+            if depth >= MAX_NESTING:
+                raise Refused("the document is nested too deeply", line)
+    get()  # DocumentEndEvent
+    event = get()
+    if not isinstance(event, yaml.StreamEndEvent):
+        raise Refused(
+            "YAML syntax error: expected a single document in the stream, but found another "
+            "document",
+            _line(event),
+        )
+    return root
+
+
+def _line(event) -> int | None:
+    return None if event.start_mark is None else event.start_mark.line + 1
+
+
+def shown(text: str) -> str:
+    """`text` quoted for a message, cut to MAX_QUOTED characters (then its length is said)."""
+    if len(text) <= MAX_QUOTED:
+        return repr(text)
+    return f"{text[:MAX_QUOTED]!r}... ({len(text)} characters)"
+
+
+def _cut(text: str) -> str:
+    """`text` (a number as written) for a message, unquoted, cut like `shown`."""
+    if len(text) <= MAX_QUOTED:
+        return text
+    return f"{text[:MAX_QUOTED]}... ({len(text)} characters)"
 
 
 def line_of(node) -> int:
-    return node.start_mark.line + 1
+    return node.line
 
 
 def join_path(path: str, key: str) -> str:
+    if len(key) > MAX_QUOTED:
+        key = key[:MAX_QUOTED] + "..."
     return f"{path}.{key}" if path else key
 
 
 def describe(node) -> str:
-    if isinstance(node, yaml.MappingNode):
+    if isinstance(node, MappingNode):
         return "a mapping"
-    if isinstance(node, yaml.SequenceNode):
+    if isinstance(node, SequenceNode):
         return "a list"
     value = scalar(node)
     if value is None:
@@ -101,8 +239,8 @@ def describe(node) -> str:
     if isinstance(value, bool):
         return "true" if value else "false"
     if isinstance(value, str):
-        return f"the string {node.value!r}"
-    return f"the number {node.value}"
+        return f"the string {shown(node.value)}"
+    return f"the number {_cut(node.value)}"
 
 
 def scalar(node):
@@ -120,7 +258,9 @@ def scalar(node):
         if len(text) > 30:  # far out of every range, and int() refuses huge digit strings
             return math.copysign(math.inf, -1.0 if text.startswith("-") else 1.0)
         return int(text)
-    if _FLOAT_RE.match(text) or _NONFINITE_RE.match(text):
+    if _FLOAT_RE.match(text):
+        return float(text)
+    if _NONFINITE_RE.match(text):
         return float(
             text.replace(".nan", "nan")
             .replace(".NaN", "nan")
@@ -130,6 +270,18 @@ def scalar(node):
             .replace(".INF", "inf")
         )
     return text
+
+
+def valid_name(value: str) -> bool:
+    """Whether `value` may name a body or a scene: 1 to MAX_NAME_LENGTH printable characters."""
+    return 0 < len(value) <= MAX_NAME_LENGTH and value.isprintable()
+
+
+def _suggestion(text: str, options) -> str | None:
+    if len(text) > 4 * MAX_QUOTED:  # difflib is quadratic: a 1 MB key is no typo
+        return None
+    close = difflib.get_close_matches(text, list(options), n=1, cutoff=0.6)
+    return close[0] if close else None
 
 
 class Reader:
@@ -146,36 +298,36 @@ class Reader:
     # containers
     def mapping(self, node, path: str, allowed) -> dict:
         """{key: (key node, value node)} in document order; refuses duplicates and unknown keys."""
-        if not isinstance(node, yaml.MappingNode):
+        if not isinstance(node, MappingNode):
             raise self.fail(
                 f"expected a mapping (key: value ...), got {describe(node)}", node, path
             )
         out: dict = {}
         for key_node, value_node in node.value:
-            if not isinstance(key_node, yaml.ScalarNode):
+            if not isinstance(key_node, ScalarNode):
                 raise self.fail("keys must be plain names", key_node, path)
             key = key_node.value
             if key in out:
                 raise self.fail(
-                    f"duplicate key {key!r} (first given at line {line_of(out[key][0])})",
+                    f"duplicate key {shown(key)} (first given at line {line_of(out[key][0])})",
                     key_node,
                     join_path(path, key),
                 )
             if allowed is not None and key not in allowed:
-                close = difflib.get_close_matches(key, list(allowed), n=1, cutoff=0.6)
+                close = _suggestion(key, allowed)
                 hint = (
-                    f" (did you mean {close[0]!r}?)"
+                    f" (did you mean {close!r}?)"
                     if close
                     else f" (valid keys: {', '.join(allowed)})"
                 )
-                raise self.fail(f"unknown key {key!r}{hint}", key_node, join_path(path, key))
+                raise self.fail(f"unknown key {shown(key)}{hint}", key_node, join_path(path, key))
             out[key] = (key_node, value_node)
         return out
 
     def sequence(
         self, node, path: str, *, min_len: int = 0, max_len: int | None = None, what: str = "items"
     ) -> list:
-        if not isinstance(node, yaml.SequenceNode):
+        if not isinstance(node, SequenceNode):
             raise self.fail(f"expected a list, got {describe(node)}", node, path)
         n = len(node.value)
         if n < min_len:
@@ -186,7 +338,7 @@ class Reader:
 
     # scalars
     def number(self, node, path: str, lo: float, hi: float, *, lo_open: bool = False) -> float:
-        value = scalar(node) if isinstance(node, yaml.ScalarNode) else node
+        value = scalar(node) if isinstance(node, ScalarNode) else node
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             raise self.fail(f"expected a number, got {describe(node)}", node, path)
         if isinstance(value, float) and math.isnan(value):
@@ -197,14 +349,14 @@ class Reader:
         if not (value > lo if lo_open else value >= lo) or not value <= hi:
             low = f"> {lo!r}" if lo_open else f">= {lo!r}"
             raise self.fail(
-                f"{node.value} is out of range (must be {low} and <= {hi!r})", node, path
+                f"{_cut(node.value)} is out of range (must be {low} and <= {hi!r})", node, path
             )
         return value
 
     def integer(self, node, path: str, lo: int, hi: int) -> int:
-        value = scalar(node) if isinstance(node, yaml.ScalarNode) else None
+        value = scalar(node) if isinstance(node, ScalarNode) else None
         if isinstance(value, float) and math.isinf(value) and _INT_RE.match(node.value):
-            raise self.fail(f"{node.value} is out of range (must be {lo}..{hi})", node, path)
+            raise self.fail(f"{_cut(node.value)} is out of range (must be {lo}..{hi})", node, path)
         if isinstance(value, bool) or not isinstance(value, int):
             raise self.fail(f"expected a whole number, got {describe(node)}", node, path)
         if not lo <= value <= hi:
@@ -212,38 +364,41 @@ class Reader:
         return value
 
     def boolean(self, node, path: str) -> bool:
-        value = scalar(node) if isinstance(node, yaml.ScalarNode) else None
+        value = scalar(node) if isinstance(node, ScalarNode) else None
         if not isinstance(value, bool):
             raise self.fail(f"expected true or false, got {describe(node)}", node, path)
         return value
 
     def string(self, node, path: str) -> str:
-        value = scalar(node) if isinstance(node, yaml.ScalarNode) else None
+        value = scalar(node) if isinstance(node, ScalarNode) else None
         if not isinstance(value, str):
             raise self.fail(f"expected a string, got {describe(node)}", node, path)
         return value
 
-    def name(self, node, path: str) -> str:
-        value = scalar(node) if isinstance(node, yaml.ScalarNode) else None
+    def name(self, node, path: str, *, max_length: int = MAX_NAME_LENGTH) -> str:
+        """A body or scene name; `max_length` lower for a generator's prefix (its bodies' names
+        add a suffix)."""
+        value = scalar(node) if isinstance(node, ScalarNode) else None
         if isinstance(value, (int, float)) and not isinstance(value, bool):
             value = node.value  # `name: 7` is the name "7"
         else:
             value = self.string(node, path)
-        if not value or len(value) > MAX_NAME_LENGTH or not value.isprintable():
+        if not valid_name(value) or len(value) > max_length:
             raise self.fail(
-                f"a name must be 1 to {MAX_NAME_LENGTH} printable characters, got {value[:40]!r}",
+                f"a name must be 1 to {max_length} printable characters, got {shown(value)}",
                 node,
                 path,
             )
         return value
 
     def choice(self, node, path: str, options) -> str:
-        value = scalar(node) if isinstance(node, yaml.ScalarNode) else None
+        value = scalar(node) if isinstance(node, ScalarNode) else None
         if not isinstance(value, str) or value not in options:
-            shown = node.value if isinstance(node, yaml.ScalarNode) else describe(node)
-            close = difflib.get_close_matches(str(shown), list(options), n=1, cutoff=0.6)
-            hint = f"; did you mean {close[0]!r}?" if close else ""
-            raise self.fail(f"{shown!r} is not one of {', '.join(options)}{hint}", node, path)
+            text = node.value if isinstance(node, ScalarNode) else None
+            close = None if text is None else _suggestion(text, options)
+            hint = f"; did you mean {close!r}?" if close else ""
+            given = describe(node) if text is None else shown(text)
+            raise self.fail(f"{given} is not one of {', '.join(options)}{hint}", node, path)
         return value
 
     def pair(
@@ -260,12 +415,12 @@ class Reader:
         strings."""
         if depth > 16:
             raise self.fail("nested too deeply", node, path)
-        if isinstance(node, yaml.MappingNode):
+        if isinstance(node, MappingNode):
             return {
                 key: self.plain(v, join_path(path, key), depth + 1)
                 for key, (_, v) in self.mapping(node, path, None).items()
             }
-        if isinstance(node, yaml.SequenceNode):
+        if isinstance(node, SequenceNode):
             return [self.plain(v, f"{path}[{i}]", depth + 1) for i, v in enumerate(node.value)]
         value = scalar(node)
         if isinstance(value, float) and not math.isfinite(value):
@@ -280,32 +435,32 @@ def optional(reader_fn, m: dict, key: str, path: str, default, *args, **kwargs):
 
 
 def scalar_or_none(node):
-    return scalar(node) if isinstance(node, yaml.ScalarNode) else node
+    return scalar(node) if isinstance(node, ScalarNode) else node
 
 
 def compose(text: str, source: str):
     """The node tree of YAML `text` (with line marks), or SceneError naming the line."""
+    parser = _LOADER(text)
     try:
-        return yaml.compose(text, Loader=_LOADER)
+        return _compose(parser)
     except Refused as exc:
-        raise SceneError(exc.what, source=source, line=exc.mark.line + 1) from None
+        raise SceneError(exc.what, source=source, line=exc.line) from None
     except yaml.MarkedYAMLError as exc:
         mark = exc.problem_mark or exc.context_mark
         what = " ".join(str(exc.problem or exc.context or "invalid YAML").split())
         line = None if mark is None else mark.line + 1
         if "nesting depth" in what:
-            # PyYAML >= 6.0.3 bounds the depth itself; older ones end in RecursionError below:
-            # the same message either way
+            # libyaml (and PyYAML >= 6.0.3) bound the depth themselves, some way past ours
             raise SceneError(
                 "the document is nested too deeply", source=source, line=line
             ) from None
-        raise SceneError(f"YAML syntax error: {what}", source=source, line=line) from None
+        raise SceneError(f"YAML syntax error: {_cut(what)}", source=source, line=line) from None
     except yaml.reader.ReaderError as exc:
         line = text[: exc.position].count("\n") + 1
         raise SceneError(
             f"character #x{exc.character:04x} is not allowed in YAML", source=source, line=line
         ) from None
     except yaml.YAMLError as exc:
-        raise SceneError(f"YAML error: {' '.join(str(exc).split())}", source=source) from None
-    except RecursionError:
-        raise SceneError("the document is nested too deeply", source=source) from None
+        raise SceneError(f"YAML error: {_cut(' '.join(str(exc).split()))}", source=source) from None
+    finally:
+        parser.dispose()

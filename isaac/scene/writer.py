@@ -5,15 +5,32 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
+import operator
+import re
 
 from isaac.scene.settings import WorldSettings
 from isaac.scene.spec import BodySpec, Scene
 
 _WORLD_FIELDS = tuple(f.name for f in dataclasses.fields(WorldSettings))
 
+# Characters JSON leaves as they are but YAML may not read back as themselves inside a
+# double-quoted scalar: C1 controls and DEL (refused), NEL, LS, PS (line breaks, folded), the
+# byte order mark and non-characters (refused by libyaml), lone surrogates (not UTF-8).
+_YAML_UNSAFE = re.compile("[\x7f-\x9f\u2028\u2029\ufeff\ufffe\uffff\ud800-\udfff]")
+
+
+def _quoted(text: str) -> str:
+    """`text` as a YAML double-quoted scalar that reads back as `text` (JSON's escapes are a
+    subset of YAML's; non-ASCII stays as is, except what YAML would not keep)."""
+    return _YAML_UNSAFE.sub(
+        lambda m: f"\\u{ord(m.group()):04x}", json.dumps(text, ensure_ascii=False)
+    )
+
 
 def _yaml_value(value) -> str:
     """Flow-style YAML for a value this loader reads back identically (floats via repr)."""
+    if type(value) is float and value - value == 0.0:  # finite: the common case, first
+        return repr(value)
     if value is None:
         return "null"
     if isinstance(value, bool):
@@ -25,20 +42,20 @@ def _yaml_value(value) -> str:
             raise ValueError(f"cannot write the non-finite number {value!r}")
         return repr(value)
     if isinstance(value, str):
-        # JSON's escapes are a subset of YAML double-quoted escapes; non-ASCII stays as is.
-        return json.dumps(value, ensure_ascii=False)
+        return _quoted(value)
     if isinstance(value, (tuple, list)):
-        return "[" + ", ".join(_yaml_value(v) for v in value) + "]"
+        return "[" + ", ".join(map(_yaml_value, value)) + "]"
     if isinstance(value, dict):
         return (
-            "{"
-            + ", ".join(
-                f"{json.dumps(str(k), ensure_ascii=False)}: {_yaml_value(v)}"
-                for k, v in value.items()
-            )
-            + "}"
+            "{" + ", ".join(f"{_quoted(str(k))}: {_yaml_value(v)}" for k, v in value.items()) + "}"
         )
     raise TypeError(f"cannot write {type(value).__name__} as scene YAML")
+
+
+# every field of a body after its name and vertices, in the order the fast reader expects
+_BODY_FIELDS = tuple(
+    f.name for f in dataclasses.fields(BodySpec) if f.name not in ("name", "vertices")
+)
 
 
 def scene_to_yaml(scene: Scene) -> str:
@@ -46,18 +63,20 @@ def scene_to_yaml(scene: Scene) -> str:
     already expanded, shapes as `polygon:` of the stored vertices), floats written with `repr`.
 
     ``load_scene_text(scene_to_yaml(s), source=s.source)`` equals `s` field by field, bit for
-    bit (`source` is not part of the text: it says where a text came from).
+    bit (`source` is not part of the text: it says where a text came from). The loader reads
+    this exact form line by line (isaac.scene.fast_reader), in a few seconds for 100,000 bodies.
     """
     lines = [f"name: {_yaml_value(scene.name)}", "world:"]
     for key in _WORLD_FIELDS:
         lines.append(f"  {key}: {_yaml_value(getattr(scene.world, key))}")
     lines.append("bodies:")
+    add = lines.append
+    fields = [(f"    {name}: ", operator.attrgetter(name)) for name in _BODY_FIELDS]
     for body in scene.bodies:
-        lines.append(f"  - name: {_yaml_value(body.name)}")
-        lines.append(f"    shape: {{polygon: {_yaml_value(body.vertices)}}}")
-        for field in dataclasses.fields(BodySpec):
-            if field.name not in ("name", "vertices"):
-                lines.append(f"    {field.name}: {_yaml_value(getattr(body, field.name))}")
+        add(f"  - name: {_yaml_value(body.name)}")
+        add(f"    shape: {{polygon: {_yaml_value(body.vertices)}}}")
+        for head, get in fields:
+            add(head + _yaml_value(get(body)))
     if scene.analytic is not None:
         lines.append(f"analytic: {_yaml_value(scene.analytic)}")
     return "\n".join(lines) + "\n"
