@@ -64,6 +64,9 @@ TARGETS = (
 RECORDING_TARGETS = (("mcap", 0.25), ("rerun", 0.50))
 REPLAY_TARGET = 1.2
 
+# how an ISAAC row steps (bench.peers.isaac_engine): one row per mode asked for
+ISAAC_MODES = ("step", "run", "advance")
+
 
 def log(msg: str) -> None:
     print(msg, file=sys.stderr, flush=True)
@@ -585,6 +588,13 @@ def parse_args(argv):
     p.add_argument("--scenes", help=f"comma-separated, from: {', '.join(ALL_SCENES)}")
     p.add_argument("--engines", help="comma-separated: pymunk, box2d, isaac (default: all three)")
     p.add_argument(
+        "--isaac-modes",
+        default="step",
+        help="how each ISAAC row steps, one row per mode: step (Simulation.step, a record per "
+        "step), run (the records of Simulation.run, computed in batches by the compiled driver), "
+        "advance (Simulation.advance: no records) (default: %(default)s)",
+    )
+    p.add_argument(
         "--presets",
         default=",".join(DEFAULT_PRESETS),
         help="ISAAC presets, one row each (default: %(default)s)",
@@ -617,9 +627,17 @@ def main(argv: list[str] | None = None) -> int:
     reps = args.reps or (2 if args.quick else 5)
     wanted = args.engines.split(",") if args.engines else [*PEERS, "isaac"]
     presets = [p for p in args.presets.split(",") if p]
+    modes = [m for m in args.isaac_modes.split(",") if m]
+    if not modes or any(m not in ISAAC_MODES for m in modes):
+        print(f"bench: --isaac-modes takes {', '.join(ISAAC_MODES)}", file=sys.stderr)
+        return 2
     engines, skipped = [], []
     for name in wanted:
-        names = [f"isaac-{p}" for p in presets] if name == "isaac" else [name]
+        names = (
+            [f"isaac-{p}" + ("" if m == "step" else f"/{m}") for p in presets for m in modes]
+            if name == "isaac"
+            else [name]
+        )
         ok, why = engine_available(names[0])
         if ok:
             engines += names
@@ -650,7 +668,8 @@ def main(argv: list[str] | None = None) -> int:
     rows = aggregate(runs, scenes, engines)
     growth_rows = growth(rows)
 
-    isaac_engines = [e for e in engines if e.startswith("isaac")]
+    # start-up, recording and the targets are measured on the step-by-step rows
+    isaac_engines = [e for e in engines if e.startswith("isaac") and "/" not in e]
     startup_rows = []
     if not args.no_startup and not args.quick:
         startup_rows = startup(engines, reps=3)

@@ -27,6 +27,7 @@ _EXPORTS = {
     "Simulation": "isaac.engine.simulation",
     "BodyView": "isaac.engine.simulation",
     "StepRecord": "isaac.engine.records",
+    "StepBatch": "isaac.engine.records",
     "Contacts": "isaac.engine.records",
     "IsaacError": "isaac.errors",
     "SceneError": "isaac.errors",

@@ -27,8 +27,8 @@ def make_engine(name: str, scene: Scene):
     if name.startswith("isaac"):
         from bench.peers.isaac_engine import IsaacEngine
 
-        preset = name.partition("-")[2] or None
-        return IsaacEngine(scene, preset=preset)
+        preset, _, mode = (name.partition("-")[2] or "").partition("/")
+        return IsaacEngine(scene, preset=preset or None, mode=mode or "step")
     raise ValueError(f"unknown engine {name!r}")
 
 

@@ -120,3 +120,62 @@ def state_hash(record: StepRecord) -> str:
         h.update(np.ascontiguousarray(arr, dtype="<f8"))
     h.update(np.ascontiguousarray(record.exists, dtype=np.uint8))
     return h.hexdigest()
+
+
+class StepBatch:
+    """The records of consecutive steps, as the compiled driver wrote them: read-only arrays
+    indexed by the step's place in the batch (0 .. steps - 1).
+
+    first: the state index of the batch's first record (its step). position (steps, n, 2),
+    angle (steps, n), velocity (steps, n, 2), angular_velocity (steps, n), exists (steps, n):
+    the state after each step (units and frames as in `StepRecord`). offsets (steps + 1,): the
+    contact rows of step s are rows offsets[s] .. offsets[s + 1] of the row arrays, which
+    `contacts_of(s)` hands out as a `Contacts`. `record(s)` is step s as a `StepRecord`
+    (views, no copies: a batch's arrays are its own and never written again).
+    """
+
+    def __init__(self, first: int, dt: float, arrays: tuple, steps: int) -> None:
+        """arrays: `isaac.engine.driver.Batch`'s fields, in order."""
+        for a in arrays:
+            a.flags.writeable = False
+        self.first = first
+        self.dt = dt
+        self.steps = steps
+        (self.position, self.angle, self.velocity, self.angular_velocity, self.exists) = (
+            a[:steps] for a in arrays[:5]
+        )
+        self.offsets = arrays[5][: steps + 1]
+        self._rows = arrays[6:]
+
+    def __len__(self) -> int:
+        return self.steps
+
+    def contacts_of(self, s: int) -> Contacts:
+        lo, hi = int(self.offsets[s]), int(self.offsets[s + 1])
+        return Contacts(*(a[lo:hi] for a in self._rows))
+
+    def record(self, s: int) -> StepRecord:
+        step = self.first + s
+        return StepRecord(
+            step=step,
+            time=step * self.dt,
+            position=self.position[s],
+            angle=self.angle[s],
+            velocity=self.velocity[s],
+            angular_velocity=self.angular_velocity[s],
+            exists=self.exists[s],
+            contacts=self.contacts_of(s),
+        )
+
+    @staticmethod
+    def of_records(records: list[StepRecord], dt: float) -> StepBatch:
+        """A batch holding these consecutive records (copies)."""
+        counts = [len(r.contacts) for r in records]
+        offsets = np.zeros(len(records) + 1, dtype=np.int64)
+        offsets[1:] = np.cumsum(counts)
+        state = [
+            np.stack([getattr(r, f) for r in records])
+            for f in ("position", "angle", "velocity", "angular_velocity", "exists")
+        ]
+        rows = [np.concatenate([getattr(r.contacts, f) for r in records]) for f in CONTACT_FIELDS]
+        return StepBatch(records[0].step, dt, (*state, offsets, *rows), len(records))

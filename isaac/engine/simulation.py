@@ -7,8 +7,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from isaac.engine.driver import Stepper
 from isaac.engine.integrate import DIVERGED_ANGLE, DIVERGED_POSITION, DIVERGED_SPEED, diverged_body
-from isaac.engine.records import Contacts, StepRecord
+from isaac.engine.records import Contacts, StepBatch, StepRecord
 from isaac.engine.step import ContactCache, StepSettings, Workspace, detect, step
 from isaac.engine.world import Model, State, build_model, initial_state
 from isaac.errors import SimulationError
@@ -28,17 +29,33 @@ class Simulation:
     """
 
     def __init__(
-        self, scene: Scene, *, start: StepRecord | None = None, compile_ahead: bool = True
+        self,
+        scene: Scene,
+        *,
+        start: StepRecord | None = None,
+        compile_ahead: bool = True,
+        staged: bool = False,
     ) -> None:
         """compile_ahead: on a machine whose numba cache lacks the solver, compile the step's
-        kernels in two processes at once before the first step (`isaac.engine.compile_ahead`)."""
+        kernels in two processes at once before the first step (`isaac.engine.compile_ahead`).
+        staged: never use the compiled driver (`isaac.engine.driver`): `run`, `advance` and
+        `batches` then step through `isaac.engine.step.step` too, one compiled call per stage
+        from Python (what `isaac run --profile` times). Both give the same bits.
+
+        `step()` always takes the staged path: for one step it is the cheaper one (the driver
+        pays for crossing its bundles into compiled code once per call).
+        """
         self.scene = scene
         self.model: Model = build_model(scene)
         self.settings = StepSettings.of(scene.world)
         self._work = Workspace(self.model)
+        self._stepper = (
+            None if staged else Stepper(self.model, self.settings, scene.world.dt, self._work)
+        )
         self.state: State = initial_state(scene, self.model)
         self._contacts = Contacts.empty()
         self._cache = ContactCache.of(self._contacts, self.model.n_bodies)
+        self._carry_in_stepper = False  # which of _cache and the stepper's Carry is current
         self._last = self.record()
         if start is not None:
             self.resume(start)
@@ -57,7 +74,22 @@ class Simulation:
         self._restore(record)
         self._contacts = record.contacts
         self._cache = ContactCache.of(record.contacts, self.model.n_bodies)
+        self._carry_in_stepper = False
         self._last = self.record()
+
+    def _staged_cache(self) -> ContactCache:
+        """What the next step reads of the last one's contacts, for the staged path."""
+        if self._carry_in_stepper:
+            self._cache = ContactCache(*self._stepper.cache_arrays())
+            self._carry_in_stepper = False
+        return self._cache
+
+    def _drive(self, steps: int, batch: tuple | None):
+        """`Stepper.run` with the carry handed over from the staged path when it was there."""
+        if not self._carry_in_stepper:
+            self._stepper.set_carry(self._cache)
+            self._carry_in_stepper = True
+        return self._stepper.run(self.state, steps, batch)
 
     @property
     def n_bodies(self) -> int:
@@ -93,33 +125,103 @@ class Simulation:
         Raises SimulationError (naming the step and body) if the state becomes NaN, infinite or
         absurdly large; the state before the failing step is what `record()` returned last.
         """
+        return self._staged_step()
+
+    def _staged_step(self) -> StepRecord:
         contacts, cache = step(
-            self.model, self.settings, self.scene.world.dt, self.state, self._work, self._cache
+            self.model,
+            self.settings,
+            self.scene.world.dt,
+            self.state,
+            self._work,
+            self._staged_cache(),
         )
         body, field = self._diverged()
         if body >= 0:
             failed = self.state.step
             self._restore(self._last)
-            name = self.model.names[body]
-            raise SimulationError(
-                f"step {failed}: body {name!r} (index {body}) has a non-finite or diverged "
-                f"{_FIELDS[field]}; the simulation stopped (try a smaller dt or more substeps)",
-                step=failed,
-                body=name,
-            )
+            self._fail(failed, body, field)
         self._contacts, self._cache = contacts, cache
         self._last = self.record()
         return self._last
+
+    def _fail(self, failed: int, body: int, field: int) -> None:
+        name = self.model.names[body]
+        raise SimulationError(
+            f"step {failed}: body {name!r} (index {body}) has a non-finite or diverged "
+            f"{_FIELDS[field]}; the simulation stopped (try a smaller dt or more substeps)",
+            step=failed,
+            body=name,
+        )
+
+    def advance(self, steps: int) -> None:
+        """Advance `steps` steps without making a record of each (the fastest path: one
+        compiled call). `record()` afterwards gives the last state and its step's contacts.
+        Raises SimulationError like `step()`, with the state left before the failing step."""
+        if steps <= 0:
+            return
+        if self._stepper is None:
+            for _ in range(steps):
+                self._staged_step()
+            return
+        if steps > 1:
+            taken, body, field, _ = self._drive(steps - 1, None)
+            if body >= 0:
+                # advance keeps no contacts: the state is the one before the failing step
+                self._contacts = Contacts.empty()
+                self._last = self.record()
+                self._fail(self.state.step + 1, body, field)
+        for _ in self.batches(1):
+            pass
+
+    def batches(self, steps: int | None = None, *, size: int = 64) -> Iterator[StepBatch]:
+        """Advance `steps` steps (default: the scene's `world.steps`), `size` at a time, and
+        yield each batch of their records (`StepBatch`: read-only arrays, one compiled call
+        per batch). A diverging step ends the run with SimulationError after the batch of
+        the steps before it was yielded."""
+        left = self.scene.world.steps if steps is None else steps
+        if size < 1:
+            raise ValueError(f"batch size must be >= 1, got {size}")
+        if self._stepper is None:
+            while left > 0:
+                records, error = [], None
+                for _ in range(min(size, left)):
+                    try:
+                        records.append(self._staged_step())
+                    except SimulationError as exc:
+                        error = exc
+                        break
+                if records:
+                    yield StepBatch.of_records(records, self.scene.world.dt)
+                if error is not None:
+                    raise error
+                left -= size
+            return
+        while left > 0:
+            k = min(size, left)
+            first = self.state.step
+            taken, body, field, arrays = self._drive(k, self._stepper.new_batch(k))
+            if taken:
+                batch = StepBatch(first + 1, self.scene.world.dt, arrays, taken)
+                last = batch.record(taken - 1)
+                self._contacts = last.contacts
+                self._last = last
+                yield batch
+            if body >= 0:
+                self._fail(self.state.step + 1, body, field)
+            left -= k
 
     def _diverged(self) -> tuple[int, int]:
         """(body, index into _FIELDS) of the first body whose state is non-finite or beyond the
         DIVERGED_* bounds, or (-1, -1)."""
         return diverged_body(self.state)
 
-    def run(self, steps: int | None = None) -> Iterator[StepRecord]:
-        """Yield the records of the next `steps` steps (default: the scene's `world.steps`)."""
-        for _ in range(self.scene.world.steps if steps is None else steps):
-            yield self.step()
+    def run(self, steps: int | None = None, *, batch: int = 64) -> Iterator[StepRecord]:
+        """A generator of the records of the next `steps` steps (default: the scene's
+        `world.steps`), computed `batch` steps per compiled call."""
+        for chunk in self.batches(steps, size=batch):
+            for s in range(chunk.steps):
+                yield chunk.record(s)
 
     def detect(self) -> Contacts:
         """The contacts at the current pose (broad and narrow phase only; nothing moves).
@@ -127,7 +229,7 @@ class Simulation:
         Push vectors, impulses and restitution are zero: they exist only once a step resolves
         the contacts.
         """
-        rows = detect(self.model, self.settings, self.state, self._work, self._cache)
+        rows = detect(self.model, self.settings, self.state, self._work, self._staged_cache())
         found = self._work.contacts(rows, 0)
         for resolved in (
             found.push_a,

@@ -1,0 +1,708 @@
+"""The compiled driver: whole steps, many per call, without returning to Python.
+
+`run_steps_sequential` and `run_steps_seed` advance the world by k steps (every sub-step of
+each: geometry, broad phase, narrow phase, push-out, impulses, integration; existence changes
+at their times; the divergence check after each step). They call the same stage kernels, in
+the same order, as `isaac.engine.step.substep`, so every path gives the same bits. Two drivers,
+one per solver, so that a run compiles only the solver it uses (numba types every branch of a
+function, and the sequential solver is most of the compile time).
+
+Arguments are named bundles of arrays (`Bodies`, `Pose`, `Scratch`, `Carry`, `Settings`,
+`Batch`), crossed into compiled code once per call: their cost is paid per batch of steps,
+not per stage.
+
+When a step finds more candidate pairs than the scratch holds, or more contact rows than the
+batch has room for, the call puts that step's starting state back and returns, saying how
+much room it needs (`NEED_PAIRS`, `NEED_ROWS`); the caller grows the buffers and calls again
+from that step, so it is computed afresh from its starting state. Buffer sizes never change a
+result (tests compare a run that grew mid-batch with one sized generously from the start).
+Only the solver's table grows in place (`isaac.engine.solver.sequential` returns it).
+
+Python crosses into these kernels with plain tuples of the bundles' fields (numba types a
+plain tuple through its fast path, a namedtuple through a slow one: 4.1 against 2.4 us for
+twelve arrays), and the kernels name them again on entry (`Bodies(*bodies)`, ...).
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numba
+import numpy as np
+
+from isaac.engine.broad_phase import find_pairs, speculative_reach
+from isaac.engine.geometry import transform
+from isaac.engine.integrate import (
+    DIVERGED_ANGLE,
+    DIVERGED_POSITION,
+    DIVERGED_SPEED,
+    add_gravity,
+    advance_positions,
+    first_diverged,
+)
+from isaac.engine.narrow_phase import collide_pairs, match_previous
+from isaac.engine.push_out import push_out
+from isaac.engine.solver.seed import solve_seed
+from isaac.engine.solver.sequential import solve_sequential
+
+
+class Bodies(NamedTuple):
+    """What never changes during a run, per body (from `isaac.engine.world.Model`)."""
+
+    vertices_local: np.ndarray  # (n, V, 2) m, body frame
+    normals_local: np.ndarray  # (n, V, 2) unit, body frame
+    vertex_count: np.ndarray  # (n,) int64
+    radius: np.ndarray  # (n,) m, the seed's MaxDist
+    thickness: np.ndarray  # (n,) m
+    inv_mass: np.ndarray  # (n,) 1/kg, 0 for concrete bodies
+    inv_inertia: np.ndarray  # (n,) 1/(kg m^2)
+    restitution: np.ndarray  # (n,)
+    friction: np.ndarray  # (n,)
+    movable: np.ndarray  # (n,) bool, not concrete
+    enters_at: np.ndarray  # (n,) s
+    leaves_at: np.ndarray  # (n,) s, inf when never
+
+
+class Pose(NamedTuple):
+    """The evolving state, updated in place (`isaac.engine.world.State`'s arrays)."""
+
+    position: np.ndarray  # (n, 2) m, world
+    angle: np.ndarray  # (n,) rad, counter-clockwise, wrapped to [-pi, pi]
+    velocity: np.ndarray  # (n, 2) m/s
+    angular_velocity: np.ndarray  # (n,) rad/s
+    exists: np.ndarray  # (n,) bool
+
+
+class Scratch(NamedTuple):
+    """A sub-step's working arrays: world geometry, candidate pairs and contact rows (the field
+    meanings of `isaac.engine.records.Contacts`)."""
+
+    vertices: np.ndarray  # (n, V, 2) m, world
+    normals: np.ndarray  # (n, V, 2)
+    aabb: np.ndarray  # (n, 4) m
+    expand: np.ndarray  # (n,) m, speculative reach
+    pair_a: np.ndarray  # (pairs,) int64
+    pair_b: np.ndarray
+    a: np.ndarray  # (2 pairs,) int32
+    b: np.ndarray
+    feature: np.ndarray
+    slot: np.ndarray
+    point: np.ndarray  # (2 pairs, 2) m
+    normal: np.ndarray
+    depth: np.ndarray  # m
+    pair_depth: np.ndarray
+    previous: np.ndarray  # int64
+    push_a: np.ndarray  # (2 pairs, 2) m
+    push_b: np.ndarray
+    impulse: np.ndarray  # N s
+    tangent: np.ndarray
+    restitution: np.ndarray
+
+
+class Carry(NamedTuple):
+    """The last sub-step's contacts, which the next one reads (axis hysteresis, warm starting):
+    `isaac.engine.step.ContactCache`'s arrays at some capacity; the first `count` are valid."""
+
+    key: np.ndarray  # int64 a * n + b, ascending
+    feature: np.ndarray  # int32
+    slot: np.ndarray  # int32
+    impulse: np.ndarray  # N s
+    tangent: np.ndarray
+
+
+class Settings(NamedTuple):
+    """`isaac.engine.step.StepSettings` as the driver reads it (plain numbers)."""
+
+    gx: float  # m/s^2
+    gy: float
+    h: float  # s, sub-step
+    dt: float  # s, step
+    substeps: int
+    explicit: bool
+    iterations: int
+    warm_starting: bool
+    two_points: bool
+    correction_mode: int
+    slop: float
+    correction: float
+    position_iterations: int
+    restitution_rule: int
+    restitution_threshold: float
+    friction_on: bool
+    friction_rule: int
+    gravity_dv: np.ndarray  # (2,) m/s
+    look_ahead: float
+    gravity_reach: float
+    hysteresis: bool
+    timed: bool
+
+
+class Batch(NamedTuple):
+    """What each step of a call produced (when asked to record): the state after step s at
+    [s], and the contact rows of step s (every sub-step, in order) at rows[offsets[s]:
+    offsets[s + 1]]. Row fields as in `isaac.engine.records.Contacts`."""
+
+    position: np.ndarray  # (k, n, 2)
+    angle: np.ndarray  # (k, n)
+    velocity: np.ndarray  # (k, n, 2)
+    angular_velocity: np.ndarray  # (k, n)
+    exists: np.ndarray  # (k, n) bool
+    offsets: np.ndarray  # (k + 1,) int64
+    substep: np.ndarray  # (rows,) int32
+    a: np.ndarray
+    b: np.ndarray
+    feature: np.ndarray
+    slot: np.ndarray
+    point: np.ndarray  # (rows, 2)
+    normal: np.ndarray
+    depth: np.ndarray
+    push_a: np.ndarray
+    push_b: np.ndarray
+    impulse: np.ndarray
+    tangent: np.ndarray
+    restitution: np.ndarray
+
+
+# what a call ended with (the first value it returns)
+DONE = 0  # every step asked for was taken
+DIVERGED = 1  # a step diverged: it was undone, and `body`, `field` say where
+NEED_PAIRS = 2  # a step found more candidate pairs than the scratch holds: undone
+NEED_ROWS = 3  # a step made more contact rows than the batch holds: undone
+
+
+@numba.njit(cache=True, nogil=True)
+def before_impulses(bodies, cfg, pose, work, carry, carried):
+    """Stages 1-4 of a sub-step (geometry, broad phase, narrow phase, push-out) and, under
+    semi-implicit Euler, gravity; returns (contact rows, candidate pairs found). When the pairs
+    do not fit the scratch nothing has moved yet (stages 1-3 only read the pose) and the rows
+    count is -1. The order is `isaac.engine.step.substep`'s."""
+    prev_key = carry.key[:carried]
+    prev_feature = carry.feature[:carried]
+    # 1. geometry
+    transform(
+        pose.position,
+        pose.angle,
+        pose.exists,
+        bodies.vertices_local,
+        bodies.normals_local,
+        bodies.vertex_count,
+        work.vertices,
+        work.normals,
+        work.aabb,
+    )
+    # 2. broad phase
+    speculative_reach(
+        pose.velocity,
+        pose.angular_velocity,
+        bodies.radius,
+        cfg.look_ahead,
+        cfg.gravity_reach,
+        work.expand,
+    )
+    pairs = find_pairs(
+        pose.position,
+        bodies.radius,
+        work.aabb,
+        work.expand,
+        bodies.movable,
+        pose.exists,
+        work.pair_a,
+        work.pair_b,
+    )
+    if pairs > work.pair_a.shape[0]:
+        return -1, pairs
+    # 3. narrow phase (and which previous contact each row continues, for warm starting)
+    rows = collide_pairs(
+        work.pair_a,
+        work.pair_b,
+        pairs,
+        work.vertices,
+        work.normals,
+        bodies.vertex_count,
+        bodies.radius,
+        pose.velocity,
+        pose.angular_velocity,
+        cfg.look_ahead,
+        cfg.gravity_reach,
+        cfg.two_points,
+        cfg.hysteresis,
+        prev_key,
+        prev_feature,
+        work.a,
+        work.b,
+        work.feature,
+        work.slot,
+        work.point,
+        work.normal,
+        work.depth,
+        work.pair_depth,
+    )
+    match_previous(
+        rows,
+        work.a,
+        work.b,
+        work.feature,
+        work.slot,
+        pose.position.shape[0],
+        prev_key,
+        prev_feature,
+        carry.slot[:carried],
+        work.previous,
+    )
+    # 4. push-out
+    push_out(
+        rows,
+        work.a,
+        work.b,
+        work.feature,
+        work.slot,
+        work.point,
+        work.normal,
+        work.pair_depth,
+        bodies.inv_mass,
+        bodies.thickness,
+        pose.position,
+        cfg.correction_mode,
+        cfg.slop,
+        cfg.correction,
+        cfg.position_iterations,
+        work.push_a,
+        work.push_b,
+    )
+    # 5. impulses come next; semi-implicit Euler puts gravity in first, so contacts see it
+    if not cfg.explicit:
+        add_gravity(pose.velocity, bodies.movable, pose.exists, cfg.gx, cfg.gy, cfg.h)
+    return rows, pairs
+
+
+@numba.njit(cache=True, nogil=True)
+def after_impulses(bodies, cfg, pose):
+    """Stage 6 of a sub-step: integration (the seed's explicit Euler puts gravity last)."""
+    advance_positions(
+        pose.position,
+        pose.angle,
+        pose.velocity,
+        pose.angular_velocity,
+        bodies.movable,
+        pose.exists,
+        cfg.h,
+    )
+    if cfg.explicit:
+        add_gravity(pose.velocity, bodies.movable, pose.exists, cfg.gx, cfg.gy, cfg.h)
+
+
+@numba.njit(cache=True, nogil=True)
+def _impulses_sequential(bodies, cfg, pose, work, carry, carried, rows, table):
+    """Stage 5 with the sequential solver; returns its table (grown if it had to)."""
+    return solve_sequential(
+        rows,
+        work.a,
+        work.b,
+        work.feature,
+        work.slot,
+        work.point,
+        work.normal,
+        work.depth,
+        work.previous,
+        pose.position,
+        pose.velocity,
+        pose.angular_velocity,
+        bodies.inv_mass,
+        bodies.inv_inertia,
+        cfg.gravity_dv,
+        bodies.restitution,
+        bodies.friction,
+        cfg.restitution_rule,
+        cfg.friction_rule,
+        cfg.restitution_threshold,
+        cfg.friction_on,
+        cfg.iterations,
+        cfg.warm_starting,
+        cfg.h,
+        carry.impulse[:carried],
+        carry.tangent[:carried],
+        work.impulse,
+        work.tangent,
+        work.restitution,
+        work.push_a,
+        work.push_b,
+        table,
+    )
+
+
+@numba.njit(cache=True, nogil=True)
+def _impulses_seed(bodies, cfg, pose, work, rows):
+    """Stage 5 with the seed's single pass."""
+    solve_seed(
+        rows,
+        work.a,
+        work.b,
+        work.feature,
+        work.slot,
+        work.point,
+        work.normal,
+        work.depth,
+        pose.position,
+        pose.velocity,
+        pose.angular_velocity,
+        bodies.inv_mass,
+        bodies.inv_inertia,
+        cfg.gravity_dv,
+        bodies.restitution,
+        bodies.friction,
+        cfg.restitution_rule,
+        cfg.friction_rule,
+        cfg.restitution_threshold,
+        cfg.friction_on,
+        cfg.h,
+        work.impulse,
+        work.tangent,
+        work.restitution,
+        work.push_a,
+        work.push_b,
+    )
+
+
+@numba.njit(cache=True, nogil=True)
+def carry_over(work, rows, n, carry):
+    """This sub-step's rows as the next one's Carry (it has the scratch's row capacity);
+    returns the count. The key is `isaac.engine.step.ContactCache`'s: a * n + b."""
+    for k in range(rows):
+        carry.key[k] = np.int64(work.a[k]) * n + work.b[k]
+        carry.feature[k] = work.feature[k]
+        carry.slot[k] = work.slot[k]
+        carry.impulse[k] = work.impulse[k]
+        carry.tangent[k] = work.tangent[k]
+    return rows
+
+
+@numba.njit(cache=True, nogil=True)
+def keep_rows(batch, at, work, rows, substep):
+    """Append a sub-step's contact rows to the batch at row `at`; returns the new end, or -1
+    (nothing written) when they do not fit."""
+    if at + rows > batch.a.shape[0]:
+        return -1
+    for k in range(rows):
+        q = at + k
+        batch.substep[q] = substep
+        batch.a[q] = work.a[k]
+        batch.b[q] = work.b[k]
+        batch.feature[q] = work.feature[k]
+        batch.slot[q] = work.slot[k]
+        batch.point[q, 0] = work.point[k, 0]
+        batch.point[q, 1] = work.point[k, 1]
+        batch.normal[q, 0] = work.normal[k, 0]
+        batch.normal[q, 1] = work.normal[k, 1]
+        batch.depth[q] = work.depth[k]
+        batch.push_a[q, 0] = work.push_a[k, 0]
+        batch.push_a[q, 1] = work.push_a[k, 1]
+        batch.push_b[q, 0] = work.push_b[k, 0]
+        batch.push_b[q, 1] = work.push_b[k, 1]
+        batch.impulse[q] = work.impulse[k]
+        batch.tangent[q] = work.tangent[k]
+        batch.restitution[q] = work.restitution[k]
+    return at + rows
+
+
+@numba.njit(cache=True, nogil=True)
+def end_step(bodies, cfg, pose, step):
+    """After the sub-steps of the step that makes state `step`: existence from
+    time = step * dt (never a running sum), then the divergence check; returns (body, field)
+    of the first diverged body or (-1, -1) (`isaac.engine.integrate.first_diverged`)."""
+    if cfg.timed:
+        time = step * cfg.dt
+        for i in range(pose.exists.shape[0]):
+            pose.exists[i] = bodies.enters_at[i] <= time and time < bodies.leaves_at[i]
+    return first_diverged(
+        pose.position,
+        pose.angle,
+        pose.velocity,
+        pose.angular_velocity,
+        pose.exists,
+        DIVERGED_POSITION,
+        DIVERGED_SPEED,
+        DIVERGED_ANGLE,
+    )
+
+
+# (element loops, not slice assignments: numba's broadcasting setitem made these few lines
+# cost 12 s of LLVM time to compile)
+@numba.njit(cache=True, nogil=True)
+def _keep_state(batch, s, pose, at):
+    for i in range(pose.position.shape[0]):
+        batch.position[s, i, 0] = pose.position[i, 0]
+        batch.position[s, i, 1] = pose.position[i, 1]
+        batch.angle[s, i] = pose.angle[i]
+        batch.velocity[s, i, 0] = pose.velocity[i, 0]
+        batch.velocity[s, i, 1] = pose.velocity[i, 1]
+        batch.angular_velocity[s, i] = pose.angular_velocity[i]
+        batch.exists[s, i] = pose.exists[i]
+    batch.offsets[s + 1] = at
+
+
+@numba.njit(cache=True, nogil=True)
+def _copy_pose(pose, into):
+    for i in range(pose.position.shape[0]):
+        into.position[i, 0] = pose.position[i, 0]
+        into.position[i, 1] = pose.position[i, 1]
+        into.angle[i] = pose.angle[i]
+        into.velocity[i, 0] = pose.velocity[i, 0]
+        into.velocity[i, 1] = pose.velocity[i, 1]
+        into.angular_velocity[i] = pose.angular_velocity[i]
+        into.exists[i] = pose.exists[i]
+
+
+@numba.njit(cache=True, nogil=True)
+def _copy_carry(carry, into, count):
+    for k in range(count):
+        into.key[k] = carry.key[k]
+        into.feature[k] = carry.feature[k]
+        into.slot[k] = carry.slot[k]
+        into.impulse[k] = carry.impulse[k]
+        into.tangent[k] = carry.tangent[k]
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _run_steps(
+    seed, bodies, cfg, pose, work, carry, saved_pose, saved_carry, batch, table, start, carried,
+    first, k, record,
+):  # fmt: skip
+    """The body of both drivers (inlined into each, so that the constant `seed` prunes the
+    solver a driver does not use before numba compiles it)."""
+    n = pose.position.shape[0]
+    at = batch.offsets[start] if record else 0
+    for s in range(k):
+        _copy_pose(pose, saved_pose)
+        _copy_carry(carry, saved_carry, carried)
+        step_carried = carried
+        need = 0
+        status = DONE
+        for index in range(cfg.substeps):
+            rows, pairs = before_impulses(bodies, cfg, pose, work, carry, carried)
+            if rows < 0:
+                status = NEED_PAIRS
+                need = pairs
+                break
+            if seed:
+                _impulses_seed(bodies, cfg, pose, work, rows)
+            else:
+                table = _impulses_sequential(bodies, cfg, pose, work, carry, carried, rows, table)
+            after_impulses(bodies, cfg, pose)
+            carried = carry_over(work, rows, n, carry)
+            if record:
+                end = keep_rows(batch, at, work, rows, index)
+                if end < 0:
+                    status = NEED_ROWS
+                    need = at + rows
+                    break
+                at = end
+        body = -1
+        field = -1
+        if status == DONE:
+            body, field = end_step(bodies, cfg, pose, first + s + 1)
+            if body >= 0:
+                status = DIVERGED
+        if status != DONE:
+            _copy_pose(saved_pose, pose)
+            _copy_carry(saved_carry, carry, step_carried)
+            return status, s, step_carried, body, field, need, table
+        if record:
+            _keep_state(batch, start + s, pose, at)
+    return DONE, k, carried, -1, -1, 0, table
+
+
+@numba.njit(cache=True, nogil=True)
+def run_steps_sequential(
+    bodies, cfg, pose, work, carry, saved_pose, saved_carry, batch, table, start, carried, first,
+    k, record,
+):  # fmt: skip
+    """Advance the pose by up to k steps from state index `first` with the sequential solver,
+    writing the batch from index `start` when `record`.
+
+    Every bundle arrives as a plain tuple of its fields (`Bodies`, `Settings`, `Pose`, `Scratch`,
+    `Carry`, `Pose` and `Carry` of the same sizes for undoing a step, `Batch`); table: the
+    solver's table; carried: how many Carry rows are valid. Returns (status, steps taken,
+    carried, body, field, pairs or rows needed, table): status DONE, or DIVERGED / NEED_PAIRS /
+    NEED_ROWS with the step that did it undone (body, field: `first_diverged`'s)."""
+    return _run_steps(
+        False, Bodies(*bodies), Settings(*cfg), Pose(*pose), Scratch(*work), Carry(*carry),
+        Pose(*saved_pose), Carry(*saved_carry), Batch(*batch), table, start, carried, first, k,
+        record,
+    )  # fmt: skip
+
+
+@numba.njit(cache=True, nogil=True)
+def run_steps_seed(
+    bodies, cfg, pose, work, carry, saved_pose, saved_carry, batch, table, start, carried, first,
+    k, record,
+):  # fmt: skip
+    """`run_steps_sequential` with the seed's single-pass solver."""
+    return _run_steps(
+        True, Bodies(*bodies), Settings(*cfg), Pose(*pose), Scratch(*work), Carry(*carry),
+        Pose(*saved_pose), Carry(*saved_carry), Batch(*batch), table, start, carried, first, k,
+        record,
+    )  # fmt: skip
+
+
+class Stepper:
+    """One simulation's handle on the compiled driver: its bundles, built once, and the loop
+    that grows a buffer and calls again when a step did not fit (Python, once per call or
+    growth, never per stage)."""
+
+    def __init__(self, model, settings, dt: float, work) -> None:
+        """model: `isaac.engine.world.Model`; settings: `isaac.engine.step.StepSettings`;
+        dt: the step (s); work: the simulation's `isaac.engine.step.Workspace`."""
+        self.n = model.n_bodies
+        self.work = work
+        self.bodies = tuple(
+            Bodies(
+                model.vertices_local,
+                model.normals_local,
+                model.vertex_count,
+                model.radius,
+                model.thickness,
+                model.inv_mass,
+                model.inv_inertia,
+                model.restitution,
+                model.friction,
+                work.movable,
+                model.enters_at,
+                model.leaves_at,
+            )
+        )
+        s = settings
+        self.settings = tuple(
+            Settings(
+                float(s.gx), float(s.gy), float(s.h), float(dt), int(s.substeps),
+                bool(s.explicit), int(s.iterations), bool(s.warm_starting), bool(s.two_points),
+                int(s.correction_mode), float(s.slop), float(s.correction),
+                int(s.position_iterations), int(s.restitution_rule),
+                float(s.restitution_threshold), bool(s.friction_on), int(s.friction_rule),
+                np.asarray(s.gravity_dv, dtype=np.float64), float(s.look_ahead),
+                float(s.gravity_reach), bool(s.hysteresis), bool(model.timed),
+            )
+        )  # fmt: skip
+        self.kernel = run_steps_seed if s.seed_solver else run_steps_sequential
+        self.substeps = int(s.substeps)
+        self._sized_for = -1
+        self.carried = 0
+        self._fit()
+        self._rows_per_step = 4 * self.n  # first guess at a batch's contact rows per step
+
+    def _fit(self) -> None:
+        """(Re)build the scratch and carry tuples for the workspace's current capacity."""
+        w = self.work
+        rows = w.a.shape[0]
+        if rows == self._sized_for:
+            return
+        self.scratch = tuple(
+            Scratch(
+                w.vertices, w.normals, w.aabb, w.expand, w.pair_a, w.pair_b, w.a, w.b,
+                w.feature, w.slot, w.point, w.normal, w.depth, w.pair_depth, w.previous,
+                w.push_a, w.push_b, w.impulse, w.tangent, w.restitution,
+            )
+        )  # fmt: skip
+        old = getattr(self, "carry", None)
+        self.carry = _carry_arrays(rows)
+        self.saved_carry = _carry_arrays(rows)
+        if old is not None:  # the valid rows go on (the workspace only grows past them)
+            m = min(self.carried, rows)
+            for new, kept in zip(self.carry, old):
+                new[:m] = kept[:m]
+        self._sized_for = rows
+
+    def set_carry(self, cache) -> None:
+        """Take the `isaac.engine.step.ContactCache` the next step reads."""
+        m = cache.key.shape[0]
+        if m > self.work.a.shape[0]:
+            self.work.grow((m + 1) // 2)
+            self._fit()
+        for into, values in zip(
+            self.carry, (cache.key, cache.feature, cache.slot, cache.impulse, cache.tangent)
+        ):
+            into[:m] = values
+        self.carried = m
+
+    def cache_arrays(self) -> tuple:
+        """Copies of the valid Carry rows: (key, feature, slot, impulse, tangent)."""
+        m = self.carried
+        return tuple(a[:m].copy() for a in self.carry)
+
+    def new_batch(self, k: int, rows: int | None = None) -> tuple:
+        n = self.n
+        rows = max(16, self._rows_per_step * k if rows is None else rows)
+        return tuple(
+            Batch(
+                np.empty((k, n, 2)), np.empty((k, n)), np.empty((k, n, 2)), np.empty((k, n)),
+                np.empty((k, n), dtype=bool), np.zeros(k + 1, dtype=np.int64),
+                np.empty(rows, dtype=np.int32), np.empty(rows, dtype=np.int32),
+                np.empty(rows, dtype=np.int32), np.empty(rows, dtype=np.int32),
+                np.empty(rows, dtype=np.int32), np.empty((rows, 2)), np.empty((rows, 2)),
+                np.empty(rows), np.empty((rows, 2)), np.empty((rows, 2)), np.empty(rows),
+                np.empty(rows), np.empty(rows),
+            )
+        )  # fmt: skip
+
+    def run(self, state, k: int, batch: tuple | None) -> tuple[int, int, int, tuple | None]:
+        """Advance `state` (an `isaac.engine.world.State`) by up to k steps, recording into a
+        fresh batch when `batch` is given (from `new_batch(k)`). Returns (steps taken, diverged
+        body or -1, field code, the batch, possibly grown)."""
+        self._fit()  # `Simulation.detect` may have grown the workspace
+        record = batch is not None
+        if batch is None:
+            batch = self._no_batch()
+        pose = (state.position, state.angle, state.velocity, state.angular_velocity, state.exists)
+        saved = (
+            np.empty_like(state.position), np.empty_like(state.angle),
+            np.empty_like(state.velocity), np.empty_like(state.angular_velocity),
+            np.empty_like(state.exists),
+        )  # fmt: skip
+        taken = 0
+        while True:
+            status, done, carried, body, field, need, table = self.kernel(
+                self.bodies, self.settings, pose, self.scratch, self.carry, saved,
+                self.saved_carry, batch, self.work.solver_table, taken, self.carried,
+                state.step, k - taken, record,
+            )  # fmt: skip
+            self.work.solver_table = table
+            self.carried = carried
+            state.step += done
+            taken += done
+            if status == NEED_PAIRS:
+                self.work.grow(need)
+                self._fit()
+            elif status == NEED_ROWS:
+                batch = _grown_rows(batch, need)
+            else:
+                if record and taken:
+                    at = batch[5][taken]
+                    self._rows_per_step = max(4, -(-int(at) // taken))
+                return taken, body, field, batch if record else None
+
+    def _no_batch(self) -> tuple:
+        if not hasattr(self, "_empty_batch"):
+            self._empty_batch = self.new_batch(0, 0)
+        return self._empty_batch
+
+
+def _carry_arrays(rows: int) -> tuple:
+    return (
+        np.zeros(rows, dtype=np.int64),
+        np.zeros(rows, dtype=np.int32),
+        np.zeros(rows, dtype=np.int32),
+        np.zeros(rows),
+        np.zeros(rows),
+    )
+
+
+def _grown_rows(batch: tuple, needed: int) -> tuple:
+    """The batch with room for at least `needed` contact rows (doubling), rows kept."""
+    b = Batch(*batch)
+    size = max(needed, 2 * b.a.shape[0])
+    fields = list(batch)
+    for i in range(6, len(fields)):
+        old = fields[i]
+        new = np.empty((size, *old.shape[1:]), dtype=old.dtype)
+        new[: old.shape[0]] = old
+        fields[i] = new
+    return tuple(fields)

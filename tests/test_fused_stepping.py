@@ -1,0 +1,179 @@
+"""The compiled driver (isaac.engine.driver) gives the same bits as stepping stage by stage:
+`step()` x n, `run(n)`, `advance(n)` then `record()`, and `batches(n)` of any size agree on
+every state and every contact row, whether or not a buffer had to grow on the way, and a
+diverging run stops at the same step, naming the same body."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from isaac.engine.records import CONTACT_FIELDS
+from isaac.engine.simulation import Simulation
+from isaac.errors import SimulationError
+from isaac.scene import PRESETS, BodySpec, Scene, WorldSettings, generators, load_scene
+
+STEPS = 40
+SCENE_DIR = Path(__file__).resolve().parents[1] / "scenes"
+
+
+def _pile(preset: str, **world) -> Scene:
+    settings = WorldSettings(
+        **{
+            **PRESETS[preset],
+            "fidelity": preset,
+            "dt": 1 / 60,
+            "steps": STEPS,
+            "friction": True,
+            **world,
+        }
+    )
+    return Scene("pile", settings, tuple(generators.pile(count=40, seed=5, width=4.0)))
+
+
+SCENES = {
+    "pile-balanced": lambda: _pile("balanced"),
+    "pile-seed": lambda: _pile("seed"),
+    "pile-fast": lambda: _pile("fast"),
+    "pile-accurate": lambda: _pile("accurate"),  # 4 sub-steps: rows of every sub-step kept
+    "spawn": lambda: load_scene(SCENE_DIR / "spawn.yaml"),  # bodies entering and leaving
+    "head-on": lambda: load_scene(SCENE_DIR / "head_on.yaml"),
+}
+
+
+def _same_record(x, y) -> None:
+    assert x.step == y.step and x.time == y.time
+    for f in ("position", "angle", "velocity", "angular_velocity", "exists"):
+        a, b = getattr(x, f), getattr(y, f)
+        assert a.dtype == b.dtype and np.array_equal(a, b), f
+        assert a.tobytes() == b.tobytes(), f  # -0.0 and NaN payloads too
+    assert len(x.contacts) == len(y.contacts)
+    for f in CONTACT_FIELDS:
+        a, b = getattr(x.contacts, f), getattr(y.contacts, f)
+        assert a.dtype == b.dtype and a.tobytes() == b.tobytes(), f
+
+
+def _stepped(scene: Scene, n: int):
+    sim = Simulation(scene, staged=True)
+    return [sim.step() for _ in range(n)]
+
+
+@pytest.mark.parametrize("name", sorted(SCENES))
+def test_every_path_gives_the_staged_steps_bits(name):
+    scene = SCENES[name]()
+    n = min(STEPS, 60)
+    reference = _stepped(scene, n)
+    assert sum(len(r.contacts) for r in reference) > 0 or name == "head-on"
+
+    _all_same(reference, list(Simulation(scene).run(n)))
+    for size in (1, 7, 64):
+        sim = Simulation(scene)
+        got = [b.record(s) for b in sim.batches(n, size=size) for s in range(len(b))]
+        _all_same(reference, got)
+    sim = Simulation(scene)
+    sim.advance(n)
+    _same_record(reference[-1], sim.record())
+    # and the stepping goes on from there with the same bits
+    _same_record(_stepped(scene, n + 1)[-1], sim.step())
+
+
+def _all_same(reference, got) -> None:
+    assert len(got) == len(reference)
+    for x, y in zip(reference, got):
+        _same_record(x, y)
+
+
+def test_mixing_step_run_and_advance_keeps_the_bits():
+    scene = _pile("balanced")
+    reference = _stepped(scene, 30)
+    sim = Simulation(scene)
+    got = [sim.step() for _ in range(5)]
+    got += list(sim.run(10))
+    sim.advance(5)
+    got += [None] * 5
+    got += [sim.step() for _ in range(10)]
+    for x, y in zip(reference, got):
+        if y is not None:
+            _same_record(x, y)
+
+
+def test_a_batch_that_outgrows_its_buffers_gives_the_bits_of_one_sized_generously():
+    scene = _pile("accurate")
+    generous = Simulation(scene)
+    generous._work.grow(4096)
+    generous._stepper._rows_per_step = 100_000
+    big = [b.record(s) for b in generous.batches(STEPS, size=STEPS) for s in range(len(b))]
+
+    tight = Simulation(scene)
+    tight._stepper._rows_per_step = 1  # room for 40 rows: a 4-sub-step pile makes ~100 a step
+    batches = list(tight.batches(STEPS, size=STEPS))
+    assert batches[0]._rows[1].shape[0] > 40 * 2  # its rows grew (doubling) mid-batch
+    small = [b.record(s) for b in batches for s in range(len(b))]
+    _all_same(big, small)
+
+
+def test_pair_buffers_grow_mid_batch_without_changing_a_bit():
+    scene = _pile("balanced")
+    reference = _stepped(scene, STEPS)
+    sim = Simulation(scene)
+    sim._work._allocate(1)  # one candidate pair of room: the first step must grow it
+    sim._stepper._fit()
+    got = list(sim.run(STEPS))
+    assert sim._work.pair_a.shape[0] > 1
+    _all_same(reference, got)
+
+
+def _diverging() -> Scene:
+    """Boxes in a free fall that passes the divergence bound (1e12 m) within a few steps
+    (dt = 2e4 s: WorldSettings built directly, as the scene loader refuses dt > 1 s)."""
+    world = WorldSettings(**{**PRESETS["balanced"], "dt": 2e4, "steps": 50})
+    box = ((-0.5, -0.5), (0.5, -0.5), (0.5, 0.5), (-0.5, 0.5))
+    bodies = (
+        BodySpec("floor", box, concrete=True),
+        BodySpec("resting", box, position=(3.0, 0.9)),
+        BodySpec("anvil", box, position=(0.0, 0.9)),
+    )
+    return Scene("diverging", world, bodies)
+
+
+def test_a_diverging_run_stops_at_the_same_step_naming_the_same_body():
+    scene = _diverging()
+    staged = Simulation(scene, staged=True)
+    kept = []
+    with pytest.raises(SimulationError) as want:
+        for _ in range(50):
+            kept.append(staged.step())
+    for how in ("run", "advance", "batches"):
+        sim = Simulation(scene)
+        got = []
+        with pytest.raises(SimulationError) as err:
+            if how == "run":
+                got.extend(sim.run(50))
+            elif how == "advance":
+                sim.advance(50)
+            else:
+                for batch in sim.batches(50, size=8):
+                    got.extend(batch.record(s) for s in range(len(batch)))
+        assert (err.value.step, err.value.body) == (want.value.step, want.value.body), how
+        assert str(err.value) == str(want.value)
+        if how != "advance":
+            _all_same(kept, got)
+        # the state is the one before the failing step, as after step()
+        for f in ("position", "velocity", "angle", "angular_velocity"):
+            assert np.array_equal(getattr(sim.state, f), getattr(staged.state, f))
+        assert sim.step_index == staged.step_index
+
+
+def test_batch_arrays_are_read_only_views_of_one_batch():
+    sim = Simulation(_pile("balanced"))
+    batch = next(sim.batches(10, size=10))
+    assert len(batch) == 10 and batch.position.shape == (10, sim.n_bodies, 2)
+    assert not batch.position.flags.writeable
+    record = batch.record(3)
+    assert record.step == batch.first + 3 and not record.position.flags.writeable
+    c = batch.contacts_of(3)
+    assert len(c) == batch.offsets[4] - batch.offsets[3]
+    with pytest.raises(ValueError):
+        record.contacts.impulse[...] = 0.0
