@@ -39,8 +39,17 @@ def register(subparsers) -> None:
     check.set_defaults(func=cmd_check)
 
 
+def _warn(command: str, scene) -> None:
+    """The scene's warnings (isaac.scene.warnings), one line each on stderr; not errors."""
+    from isaac.scene.warnings import scene_warnings
+
+    for line in scene_warnings(scene):
+        print(f"isaac {command}: warning: {line}", file=sys.stderr)
+
+
 def cmd_check(args: argparse.Namespace) -> int:
     scene = load_scene(args.scene)
+    _warn("check", scene)
     concrete = sum(b.concrete for b in scene.bodies)
     w = scene.world
     print(
@@ -117,6 +126,7 @@ def cmd_run(args: argparse.Namespace) -> int:
 
     started = time.perf_counter()
     scene = load_scene(args.scene)
+    _warn("run", scene)
     steps = scene.world.steps if args.steps is None else args.steps
     if steps < 0:
         raise IsaacError(f"--steps must be >= 0, got {steps}")
