@@ -15,29 +15,47 @@ Used by ``isaac inspect`` / ``isaac recover`` / ``isaac view`` and by the replay
     log.step(k)                          # one LoggedStep (LogError if absent)
     log.summary()                        # LogSummary: counts, extremes, energies
 
-The file is read sequentially with MCAP's stream reader, so a file that was never closed (a run
-killed with SIGKILL, a file cut short) yields every step in its complete chunks: the read stops
-quietly at the first damaged record (``log.damage`` then says what was wrong). A step counts only
-when its ``/bodies`` and ``/contacts`` messages are both there.
+The file is read in order, within bounds (`recorder.mcap_records`: only a regular file, every
+length checked before it is allocated, every chunk CRC-checked), so a file that was never closed
+(a run killed with SIGKILL, a file cut short) yields every step in its complete chunks. Steps are
+checked as they come (`recorder.integrity.StepReader`): a step counts only when its ``/bodies``,
+``/contacts`` and ``/stats`` are all there, and reading stops at the first damaged record,
+missing, repeated or incomplete step; after `steps` ``log.damage`` (a `Damage` or None) says
+what and where (the step, the byte), and a closed log's summary and ``isaac.end`` are compared
+with what was read. A message whose arrays do not fit together (a ``/bodies`` array one value
+short, a contact naming a body that does not exist) raises LogError ("damaged log").
 """
 
 from __future__ import annotations
 
-import io
 import json
+import math
 import os
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 
 import numpy as np
-from mcap.exceptions import McapError
-from mcap.records import Attachment, Channel, Header, Message, Metadata, Schema
-from mcap.stream_reader import StreamReader
+from mcap.records import Header, Metadata
 from mcap.writer import Writer
 
 from isaac.engine.records import Contacts, StepRecord
 from isaac.errors import LogError
+from isaac.scene.limits import MAX_VERTICES
 from recorder import schema as S
+from recorder.integrity import Damage, StepReader
+from recorder.mcap_records import (
+    MAGIC,
+    OP_ATTACHMENT,
+    OP_CHANNEL,
+    OP_CHUNK,
+    OP_FOOTER,
+    OP_HEADER,
+    OP_METADATA,
+    OP_SCHEMA,
+    McapScan,
+    RecordError,
+    open_log,
+)
 from recorder.mcap_writer import (
     COMPRESSION,
     FORMAT_NAME,
@@ -47,7 +65,7 @@ from recorder.mcap_writer import (
     end_metadata,
 )
 
-MCAP_MAGIC = b"\x89MCAP0\r\n"
+MCAP_MAGIC = MAGIC
 
 
 @dataclass(frozen=True, eq=False)
@@ -73,8 +91,20 @@ class WorldTable:
 
     @staticmethod
     def from_message(msg: dict) -> WorldTable:
+        """The table of a decoded `/world` message; ValueError (one line) if its bodies do not
+        fit together: indices not 0..n-1, an odd number of vertex coordinates, or a polygon
+        with fewer than 3 or more than MAX_VERTICES vertices."""
         bodies = sorted(msg["bodies"], key=lambda b: b["index"])
         n = len(bodies)
+        if [b["index"] for b in bodies] != list(range(n)):
+            raise ValueError(f"/world: the body indices are not 0..{n - 1}")
+        for b in bodies:
+            size = b["vertices_local"].size
+            if size % 2 or not 3 <= size // 2 <= MAX_VERTICES:
+                raise ValueError(
+                    f"/world: body {b['index']} has {size} vertex coordinates "
+                    f"(a polygon has 3 to {MAX_VERTICES} x, y pairs)"
+                )
         counts = np.array([b["vertices_local"].size // 2 for b in bodies], dtype=np.int64)
         v_max = int(counts.max()) if n else 0
         local = np.zeros((n, v_max, 2))
@@ -97,7 +127,7 @@ class WorldTable:
 @dataclass(frozen=True, eq=False)
 class LoggedStep:
     """One step read back: the record (state after the step + its contacts), its `/stats`
-    values (dict, or None if missing) and the `/world` table in force at that step."""
+    values (dict) and the `/world` table in force at that step."""
 
     record: StepRecord
     stats: dict | None
@@ -126,32 +156,66 @@ class LogSummary:
     messages: dict = field(default_factory=dict)
 
 
+def _sized(msg: dict, topic: str, key: str, n: int, what: str):
+    a = msg[key]
+    if a.size != n:
+        raise ValueError(f"{topic}: {key} holds {a.size} values for {what}")
+    return a
+
+
+def check_bodies(msg: dict) -> int:
+    """The number of bodies n of a decoded `/bodies` message; ValueError (one line) unless every
+    per-body array holds n values (2n for the 2-vectors)."""
+    n = msg["angle"].size
+    for key, size in (("position", 2 * n), ("velocity", 2 * n), ("angular_velocity", n)):
+        _sized(msg, "/bodies", key, size, f"{n} bodies")
+    _sized(msg, "/bodies", "exists", n, f"{n} bodies")
+    return n
+
+
 def record_from_messages(bodies: dict, contacts: dict) -> StepRecord:
-    """A StepRecord from decoded `/bodies` and `/contacts` messages (arrays are read-only views)."""
-    n = bodies["angle"].size
-    return StepRecord(
+    """A StepRecord from decoded `/bodies` and `/contacts` messages (arrays are read-only views).
+
+    Raises ValueError (one line) if the arrays do not fit together: every per-body array must
+    hold n values (2n for 2-vectors), every per-contact array m (2m), and a contact's bodies
+    must be among the n."""
+    n = check_bodies(bodies)
+    record = StepRecord(
         step=int(bodies["step"]),
         time=float(bodies["time"]),
         position=bodies["position"].reshape(n, 2),
         angle=bodies["angle"],
         velocity=bodies["velocity"].reshape(n, 2),
         angular_velocity=bodies["angular_velocity"],
-        exists=bodies["exists"] if bodies["exists"].size == n else np.ones(n, dtype=bool),
+        exists=bodies["exists"],
         contacts=contacts_from_message(contacts),
     )
+    c = record.contacts
+    if len(c):
+        # the fixed32 indices were read as int32: a value past 2^31 shows as negative
+        outside = (c.a < 0) | (c.a >= n) | (c.b < 0) | (c.b >= n)
+        if outside.any():
+            row = int(np.flatnonzero(outside)[0])
+            raise ValueError(
+                f"/contacts: row {row} names bodies {contacts['a'][row]} and "
+                f"{contacts['b'][row]}; the step has {n} bodies"
+            )
+    return record
 
 
 def contacts_from_message(msg: dict) -> Contacts:
+    """`Contacts` from a decoded `/contacts` message; ValueError if an array is not m long."""
     m = msg["a"].size
+    what = f"{m} contact rows"
 
     def i32(k):
-        return msg[k].astype(np.int32) if msg[k].size == m else np.zeros(m, np.int32)
+        return _sized(msg, "/contacts", k, m, what).astype(np.int32)
 
     def f(k):
-        return msg[k] if msg[k].size == m else np.zeros(m)
+        return _sized(msg, "/contacts", k, m, what)
 
     def v(k):
-        return msg[k].reshape(m, 2) if msg[k].size == 2 * m else np.zeros((m, 2))
+        return _sized(msg, "/contacts", k, 2 * m, what).reshape(m, 2)
 
     return Contacts(
         substep=i32("substep"),
@@ -170,138 +234,145 @@ def contacts_from_message(msg: dict) -> Contacts:
     )
 
 
+# what a decoder or `record_from_messages` raises on a malformed message
+DECODE_ERRORS = (S.WireError, UnicodeDecodeError, ValueError, IndexError, KeyError, TypeError)
+
+
 class LogReader:
     """A readable ISAAC MCAP log (clean or not). See the module docstring for the API."""
 
     def __init__(self, path: str) -> None:
         self.path = str(path)
-        try:
-            self.size = os.path.getsize(self.path)
-            with open(self.path, "rb") as f:
-                head = f.read(len(MCAP_MAGIC))
-        except OSError as exc:
-            raise LogError(f"{self.path}: {exc.strerror or exc}") from exc
-        if head != MCAP_MAGIC:
-            what = "empty file" if self.size == 0 else "not an MCAP file"
-            raise LogError(f"{self.path}: {what}")
+        f, self.size = open_log(self.path)  # a regular file, or LogError before any open
         self.header: Header | None = None
         self.metadata: dict[str, str] = {}
         self.attachments: dict[str, bytes] = {}
         self._end: dict[str, str] | None = None
         self._scanned = False
-        self.damage: str | None = None
-        # metadata and the scene come before the first chunk: read only that far
-        for record in self._records(emit_chunks=True):
-            if isinstance(record, Header):
-                self.header = record
-            elif isinstance(record, Metadata) and record.name == META_START:
-                self.metadata = dict(record.metadata)
-            elif isinstance(record, Attachment):
-                self.attachments[record.name] = record.data
-            elif not isinstance(record, (Metadata, Schema, Channel)):
-                break
+        self.damage: Damage | None = None
+        self.tail: int | None = None
+        self.claimed_steps: int | None = None
+        self._header_records: list = []  # metadata and attachments before the first chunk
+        self._reader: StepReader | None = None  # of the last `steps`
+        header_damage: RecordError | None = None
+        with f:
+            scan = McapScan(f, self.size)
+            # metadata and the scene come before the first chunk: read only that far
+            try:
+                for offset, opcode, body in scan.records(until=(OP_CHUNK,)):
+                    if opcode in (OP_HEADER, OP_METADATA, OP_ATTACHMENT):
+                        record = scan.parse(offset, opcode, body)
+                        if isinstance(record, Header):
+                            self.header = record
+                            continue
+                        if isinstance(record, Metadata):
+                            if record.name == META_END:
+                                continue
+                            if record.name == META_START and not self.metadata:
+                                self.metadata = dict(record.metadata)
+                        else:
+                            self.attachments.setdefault(record.name, bytes(record.data))
+                        self._header_records.append(record)
+                    elif opcode not in (OP_SCHEMA, OP_CHANNEL):
+                        break
+            except RecordError as exc:
+                if exc.offset == 0:
+                    what = "empty file" if self.size == 0 else "not an MCAP file"
+                    raise LogError(f"{self.path}: {what}") from None
+                header_damage = exc
+        damaged = "" if header_damage is None else f" (damaged log: {header_damage})"
         if self.metadata.get("format") != FORMAT_NAME:
-            raise LogError(f"{self.path}: not an ISAAC log (no '{META_START}' metadata)")
+            raise LogError(f"{self.path}: not an ISAAC log (no '{META_START}' metadata){damaged}")
         if SCENE_ATTACHMENT not in self.attachments:
-            raise LogError(f"{self.path}: the log has no {SCENE_ATTACHMENT} attachment")
-        try:
-            self.settings = json.loads(self.metadata["settings"])
-            self.dt = float(self.metadata["dt"])
-        except (KeyError, ValueError) as exc:
-            raise LogError(f"{self.path}: bad '{META_START}' metadata ({exc})") from exc
+            raise LogError(f"{self.path}: the log has no {SCENE_ATTACHMENT} attachment{damaged}")
+        self.settings, self.dt = _settings(self.path, self.metadata)
         self.closed_cleanly = self._has_footer()
         self._world0: WorldTable | None = None
 
-    # -- raw records ---------------------------------------------------------------------------
-
-    def _records(self, *, emit_chunks: bool = False) -> Iterator:
-        """Every MCAP record in file order; stops quietly at the first damaged one."""
-        with open(self.path, "rb") as f:
-            reader = StreamReader(
-                f, emit_chunks=emit_chunks, validate_crcs=True, record_size_limit=max(self.size, 1)
-            )
-            it = reader.records
-            while True:
-                try:
-                    record = next(it)
-                except StopIteration:
-                    return
-                except (McapError, ValueError, EOFError, RuntimeError, OSError) as exc:
-                    # the end of what is readable (a cut or unfinished file, a bad CRC)
-                    self.damage = f"{type(exc).__name__} at byte {f.tell()}"
-                    return
-                except Exception as exc:  # noqa: BLE001 - decompressor errors vary by library
-                    self.damage = f"{type(exc).__name__} at byte {f.tell()}"
-                    return
-                yield record
-
     def _has_footer(self) -> bool:
         """True when the file ends with a footer and the magic (it was finished)."""
-        if self.size < 2 * len(MCAP_MAGIC) + 29:
+        if self.size < 2 * len(MAGIC) + 29:
             return False
-        with open(self.path, "rb") as f:
-            f.seek(-len(MCAP_MAGIC), io.SEEK_END)
-            if f.read() != MCAP_MAGIC:
+        f, _size = open_log(self.path)
+        with f:
+            f.seek(self.size - len(MAGIC))
+            if f.read() != MAGIC:
                 return False
-            f.seek(-(len(MCAP_MAGIC) + 29), io.SEEK_END)
-            return f.read(1) == b"\x02"  # footer opcode
+            f.seek(self.size - len(MAGIC) - 29)
+            return f.read(1) == bytes([OP_FOOTER])
 
-    def messages(self, topics=None) -> Iterator[tuple[str, Message, dict]]:
-        """(topic, raw MCAP message, decoded dict) in file order, for ``topics`` (all if None)."""
-        channels: dict[int, str] = {}
+    def messages(self, topics=None) -> Iterator[tuple[str, object, dict]]:
+        """(topic, message, decoded dict) in file order, for ``topics`` (all if None).
+
+        The message has ``channel_id``, ``sequence``, ``log_time``, ``publish_time`` and
+        ``data`` like an mcap Message. Stops at the first damaged record (``self.damage``);
+        LogError if a message does not decode."""
         want = None if topics is None else set([topics] if isinstance(topics, str) else topics)
-        for record in self._records():
-            if isinstance(record, Channel):
-                channels[record.id] = record.topic
-            elif isinstance(record, Message):
-                topic = channels.get(record.channel_id)
-                if topic not in S.TOPICS or (want is not None and topic not in want):
-                    continue
-                try:
-                    decoded = S.decode(S.TOPICS[topic], record.data)
-                except (S.WireError, UnicodeDecodeError) as exc:
-                    raise LogError(
-                        f"{self.path}: step {record.sequence}: bad {topic} message ({exc})"
-                    ) from exc
-                yield topic, record, decoded
-            elif isinstance(record, Metadata) and record.name == META_END:
-                self._end = dict(record.metadata)
+        f, size = open_log(self.path)
+        with f:
+            scan = McapScan(f, size)
+            try:
+                for msg in scan.messages():
+                    channel = scan.channels.get(msg.channel_id)
+                    topic = channel.topic if channel is not None else None
+                    if topic not in S.TOPICS or (want is not None and topic not in want):
+                        continue
+                    try:
+                        decoded = S.decode(S.TOPICS[topic], bytes(msg.data))
+                    except DECODE_ERRORS as exc:
+                        raise LogError(
+                            f"{self.path}: damaged log: step {msg.sequence}: "
+                            f"bad {topic} message ({exc})"
+                        ) from None
+                    yield topic, msg._replace(data=bytes(msg.data)), decoded
+            except RecordError as exc:
+                if not exc.what.startswith("the file ends without a footer"):
+                    self.damage = Damage(exc.what, None, exc.offset)
+        ends = [m for _o, m in scan.metadata if m.name == META_END]
+        if ends:
+            self._end = dict(ends[-1].metadata)
 
     # -- steps ---------------------------------------------------------------------------------
 
     def steps(self) -> Iterator[LoggedStep]:
-        """Every complete step in order (state, contacts, stats and the `/world` in force)."""
+        """Every complete step in order (state, contacts, stats and the `/world` in force), up
+        to the first damage (``self.damage`` says what and where). LogError ("damaged log") if
+        a step's messages do not decode or do not fit together."""
+        reader = self._reader = StepReader(self.path, closed=self.closed_cleanly)
         world: WorldTable | None = None
-        pending: dict = {}
-        current = None
-
-        def emit():
-            if "/bodies" in pending and "/contacts" in pending and world is not None:
-                return LoggedStep(
-                    record_from_messages(pending["/bodies"], pending["/contacts"]),
-                    pending.get("/stats"),
-                    world,
-                )
-            return None
-
-        for topic, message, decoded in self.messages():
-            if current is not None and message.sequence != current:
-                done = emit()
-                if done is not None:
-                    yield done
-                pending = {}
-            current = message.sequence
-            if topic == "/world":
-                world = WorldTable.from_message(decoded)
-                if self._world0 is None:
-                    self._world0 = world
-            else:
-                pending[topic] = decoded
-        if current is not None and "/stats" in pending:
-            # the last step counts only if it was written completely (stats come last)
-            done = emit()
-            if done is not None:
-                yield done
+        for step, messages in reader.steps():
+            try:
+                if "/world" in messages:
+                    table = WorldTable.from_message(S.decode("World", bytes(messages["/world"])))
+                    if world is not None and len(table.names) != len(world.names):
+                        raise ValueError(
+                            f"/world: {len(table.names)} bodies, {len(world.names)} before"
+                        )
+                    world = table
+                    if self._world0 is None:
+                        self._world0 = world
+                assert world is not None  # the first step has one (recorder.integrity)
+                # bytes: the decoder slices strings out and decodes them
+                bodies = S.decode("Bodies", bytes(messages["/bodies"]))
+                contacts = S.decode("Contacts", bytes(messages["/contacts"]))
+                stats = S.decode("Stats", bytes(messages["/stats"]))
+                for topic, msg in (("/bodies", bodies), ("/contacts", contacts), ("/stats", stats)):
+                    if msg["step"] != step:
+                        raise ValueError(f"{topic}: the message says step {msg['step']}")
+                record = record_from_messages(bodies, contacts)
+                if record.position.shape[0] != len(world.names):
+                    raise ValueError(
+                        f"/bodies holds {record.position.shape[0]} bodies, /world "
+                        f"{len(world.names)}"
+                    )
+            except DECODE_ERRORS as exc:
+                raise LogError(f"{self.path}: damaged log: step {step}: {exc}") from None
+            yield LoggedStep(record, stats, world)
+        self.damage = reader.damage
+        self.tail = reader.tail
+        self.claimed_steps = reader.claimed_steps
+        if reader.end is not None:
+            self._end = reader.end
         self._scanned = True
 
     def step(self, k: int) -> LoggedStep:
@@ -311,23 +382,31 @@ class LogReader:
                 return s
             if s.step > k:
                 break
+        if self.damage is not None:
+            raise LogError(
+                f"{self.path}: step {k} is not readable: the log is damaged from "
+                f"{self.damage.at()} on: {self.damage}"
+            )
         raise LogError(f"{self.path}: step {k} is not in the log")
 
     @property
     def world(self) -> WorldTable:
-        """The `/world` table of step 0."""
+        """The `/world` table of the log's first step."""
         if self._world0 is None:
-            for _topic, _message, decoded in self.messages("/world"):
-                self._world0 = WorldTable.from_message(decoded)
+            for _ in self.steps():
                 break
         if self._world0 is None:
-            raise LogError(f"{self.path}: the log holds no /world message")
+            why = f" ({self.damage})" if self.damage is not None else ""
+            raise LogError(f"{self.path}: the log holds no complete step{why}")
         return self._world0
 
     @property
     def scene_text(self) -> str:
         """The expanded scene YAML the run used (attachment ``scene.yaml``)."""
-        return self.attachments[SCENE_ATTACHMENT].decode("utf-8")
+        try:
+            return self.attachments[SCENE_ATTACHMENT].decode("utf-8")
+        except UnicodeDecodeError as exc:
+            raise LogError(f"{self.path}: the embedded scene is not UTF-8 text ({exc})") from None
 
     def scene(self):
         """The run's `isaac.scene.Scene`, loaded from the embedded ``scene.yaml``."""
@@ -339,11 +418,14 @@ class LogReader:
     def end(self) -> dict | None:
         """The ``isaac.end`` metadata (complete, steps_written, last_step, stopped_at, reason),
         or None if the file was never closed."""
-        if self._end is None and not self._scanned:
-            for record in self._records(emit_chunks=True):
-                if isinstance(record, Metadata) and record.name == META_END:
-                    self._end = dict(record.metadata)
-            self._scanned = True
+        if self._end is None and not self._scanned and self.closed_cleanly:
+            f, size = open_log(self.path)
+            with f:
+                scan = McapScan(f, size)
+                scan.read_summary()  # the metadata index at the end points at it
+            ends = [m for _o, m in scan.metadata if m.name == META_END]
+            if ends:
+                self._end = dict(ends[-1].metadata)
         return self._end
 
     @property
@@ -379,32 +461,67 @@ class LogReader:
         return s
 
 
-def recover(src: str, dst: str) -> tuple[int, int | None]:
+def _settings(path: str, metadata: dict) -> tuple[dict, float]:
+    """The ``isaac`` metadata's world settings (a JSON object) and dt (finite, > 0)."""
+    try:
+        settings = json.loads(metadata["settings"])
+        dt = float(metadata["dt"])
+    except KeyError as exc:
+        raise LogError(f"{path}: damaged log: no {exc} in the '{META_START}' metadata") from None
+    except (ValueError, RecursionError) as exc:
+        why = "too deeply nested" if isinstance(exc, RecursionError) else exc
+        raise LogError(f"{path}: damaged log: bad '{META_START}' metadata ({why})") from None
+    if not isinstance(settings, dict):
+        raise LogError(
+            f"{path}: damaged log: the '{META_START}' metadata's settings are "
+            f"{type(settings).__name__}, not a JSON object"
+        )
+    if not (math.isfinite(dt) and dt > 0):
+        raise LogError(f"{path}: damaged log: the '{META_START}' metadata's dt is {dt!r}")
+    return settings, dt
+
+
+class Recovered(tuple):
+    """What `recover` wrote: (steps kept, the last of them); ``lost`` says what it could not
+    salvage (None when it kept everything the source claimed)."""
+
+    lost: str | None
+
+    def __new__(cls, kept: int, last: int | None, lost: str | None) -> Recovered:
+        self = super().__new__(cls, (kept, last))
+        self.lost = lost
+        return self
+
+    @property
+    def kept(self) -> int:
+        return self[0]
+
+    @property
+    def last(self) -> int | None:
+        return self[1]
+
+
+def recover(src: str, dst: str) -> Recovered:
     """Rewrite the readable part of ``src`` (e.g. a ``.partial`` file) as a clean, indexed MCAP.
 
-    Keeps the metadata, the scene attachment, and every complete step (a step whose
-    ``/bodies``, ``/contacts`` and ``/stats`` are all present); messages are copied byte for
-    byte. Writes ``dst.partial`` then renames. Returns (steps kept, last step kept).
+    Keeps the metadata, the scene attachment, and every step up to the first damage or the end
+    (complete steps, one after another: `recorder.integrity.StepReader`); messages are copied
+    byte for byte. Writes ``dst.partial`` then renames. LogError if no complete step is left,
+    or if a step's messages do not decode or fit together (`LogReader.steps`: a damaged log
+    whose chunks are intact; copying it would pass the damage on).
     """
     log = LogReader(src)
-    complete_steps: set[int] = set()
-    seen: dict[int, set] = {}
-    channels: dict[int, str] = {}
-    for record in log._records():
-        if isinstance(record, Channel):
-            channels[record.id] = record.topic
-        elif isinstance(record, Message):
-            seen.setdefault(record.sequence, set()).add(channels.get(record.channel_id))
-    for step, topics in seen.items():
-        if {"/bodies", "/contacts", "/stats"} <= topics:
-            complete_steps.add(step)
-    last = max(complete_steps) if complete_steps else None
+    for _ in log.steps():
+        pass
+    reader = log._reader
+    first, last, damage = reader.first, reader.last, reader.damage
+    if last is None:
+        why = f" (damaged log: {damage})" if damage is not None else ""
+        raise LogError(f"{src}: no complete step to recover{why}")
+    lost = _lost(reader)
     # the same chunk compression as the source's first chunk
-    compression = "none"
-    for record in log._records(emit_chunks=True):
-        if type(record).__name__ == "Chunk":
-            compression = record.compression or "none"
-            break
+    chunks = reader.scan.chunks
+    compression = (chunks[0].compression if chunks else "") or "none"
     tmp = str(dst) + ".partial"
     if os.path.abspath(tmp) == os.path.abspath(src):
         tmp = str(dst) + ".recovering"
@@ -423,58 +540,84 @@ def recover(src: str, dst: str) -> tuple[int, int | None]:
             profile=header.profile if header else "isaac",
             library=header.library if header else "isaac-recorder",
         )
-        schema_ids: dict[int, int] = {}
-        channel_ids: dict[int, int] = {}
-        end = None
         # metadata and attachments first, as the writer puts them
-        for record in log._records(emit_chunks=True):
+        for record in log._header_records:
             if isinstance(record, Metadata):
-                if record.name == META_END:
-                    end = dict(record.metadata)
-                else:
-                    writer.add_metadata(record.name, dict(record.metadata))
-            elif isinstance(record, Attachment):
+                writer.add_metadata(record.name, dict(record.metadata))
+            else:
                 writer.add_attachment(
                     record.create_time, record.log_time, record.name, record.media_type, record.data
                 )
-        count = 0
-        for record in log._records():
-            if isinstance(record, Schema) and record.id not in schema_ids:
-                schema_ids[record.id] = writer.register_schema(
-                    record.name, record.encoding, record.data
-                )
-            elif isinstance(record, Channel) and record.id not in channel_ids:
-                channel_ids[record.id] = writer.register_channel(
-                    record.topic,
-                    record.message_encoding,
-                    schema_ids.get(record.schema_id, 0),
-                    dict(record.metadata),
-                )
-            elif isinstance(record, Message):
-                if record.sequence in complete_steps or (
-                    channels.get(record.channel_id) == "/world"
-                    and last is not None
-                    and record.sequence <= last
-                ):
-                    writer.add_message(
-                        channel_ids[record.channel_id],
-                        record.log_time,
-                        record.data,
-                        record.publish_time,
-                        record.sequence,
-                    )
-                    if channels.get(record.channel_id) == "/stats":
-                        count += 1
-        if end is None or not log.closed_cleanly:
+        count = _copy_steps(src, writer, first, last)
+        end = reader.end if (lost is None and reader.end is not None) else None
+        if end is None:
             end = end_metadata(
                 complete=False,
                 steps=count,
                 last_step=last,
-                stopped_at=None if last is None else last + 1,
-                reason="recovered from a log that was not closed",
+                stopped_at=last + 1,
+                reason="recovered from a log that was not closed"
+                if lost is None or not log.closed_cleanly
+                else f"recovered from a damaged log: {lost}",
             )
             end["recovered"] = "true"
         writer.add_metadata(META_END, end)
         writer.finish()
     os.replace(tmp, dst)
-    return count, last
+    return Recovered(count, last, lost)
+
+
+def _lost(reader: StepReader) -> str | None:
+    """What `recover` cannot salvage, in one line (None: nothing)."""
+    parts = []
+    if reader.damage is not None:
+        parts.append(f"{reader.damage.at()} and after: {reader.damage}")
+    elif reader.tail is not None:
+        parts.append(f"step {reader.tail}, only partly written")
+    if not reader.closed:
+        parts.append("the log was not closed, so steps after its last chunk may be missing")
+    claimed = reader.claimed_steps
+    if claimed is not None and reader.closed and reader.count < claimed:
+        parts.append(f"{claimed - reader.count} of the {claimed} steps it claims")
+    return "; ".join(parts) or None
+
+
+def _copy_steps(src: str, writer: Writer, first: int, last: int) -> int:
+    """Copy every message of steps ``first..last`` (in file order, up to where the step
+    sequence stops rising) into ``writer``; returns the number of ``/stats`` messages copied."""
+    f, size = open_log(src)
+    schema_ids: dict[int, int] = {}
+    channel_ids: dict[int, int] = {}
+    count = 0
+    previous = first
+    with f:
+        scan = McapScan(f, size)
+        try:
+            for msg in scan.messages():
+                if not previous <= msg.sequence <= last:
+                    break
+                previous = msg.sequence
+                cid = msg.channel_id
+                if cid not in channel_ids:
+                    channel = scan.channels.get(cid)
+                    if channel is None:
+                        continue
+                    schema = scan.schemas.get(channel.schema_id)
+                    if schema is not None and schema.id not in schema_ids:
+                        schema_ids[schema.id] = writer.register_schema(
+                            schema.name, schema.encoding, schema.data
+                        )
+                    channel_ids[cid] = writer.register_channel(
+                        channel.topic,
+                        channel.message_encoding,
+                        schema_ids.get(channel.schema_id, 0),
+                        dict(channel.metadata),
+                    )
+                writer.add_message(
+                    channel_ids[cid], msg.log_time, bytes(msg.data), msg.publish_time, msg.sequence
+                )
+                if scan.channels[cid].topic == "/stats":
+                    count += 1
+        except RecordError:
+            pass  # where the first pass stopped too: every step up to `last` was before it
+    return count

@@ -42,9 +42,9 @@ from recorder.mcap_writer import (
     encode_stats,
     encode_world,
 )
-from recorder.reader import record_from_messages
+from recorder.reader import DECODE_ERRORS, record_from_messages
 from recorder.stats import compute_stats
-from replay.divergence import locate
+from replay.divergence import MalformedMessage, locate
 from replay.reader import Prefetch, RawLog, RawStep
 from replay.report import DEFAULT_MAX_REPORTED, Divergence, Report
 
@@ -118,45 +118,87 @@ def load_embedded_scene(log: RawLog) -> tuple[Scene, list[str]]:
     return scene, notes
 
 
-def _truncation(log: RawLog, last: int | None, report: Report) -> None:
-    """Say when the log was cut short or the run did not finish."""
-    end = log.end
-    last_text = "no complete step" if last is None else f"step {last}"
-    if log.closed_cleanly and log.damage:
-        # a finished file that cannot be read to its end: corrupt, not cut
-        report.truncated = True
-        logged_last = (end or {}).get("last_step") or "?"
-        report.truncated_detail = (
-            f"the log is damaged: reading stopped at {log.damage}; "
-            f"replayed up to {last_text} of the {logged_last} it holds"
+def _completeness(
+    log: RawLog, report: Report, *, to_step: int | None, label: str = "", partial: bool
+) -> None:
+    """Whether every step the log claims (or the ``--to-step`` window) was read whole: sets
+    ``complete``, ``damage``, ``claimed_steps`` and the explaining note (``truncated_detail``)."""
+    report.partial = partial
+    damage = log.damage
+    name = f"log {label}: " if label else ""
+    if report.claimed_steps is None or (log.claimed_steps or 0) > report.claimed_steps:
+        report.claimed_steps = log.claimed_steps
+    if damage is not None and to_step is not None and (damage.step or -1) > to_step:
+        # beyond the window asked for: the window itself was read whole
+        report.notes.append(f"{name}the log is damaged after --to-step {to_step}: {damage}")
+        return
+    if not log.read_through and damage is None:
+        return  # stopped at --to-step: the window was read whole
+    if damage is not None:
+        complete = False
+        why = f"{name}the log is damaged from {damage.at()} on"
+        text = name + str(damage)
+        report.damage = text if not report.damage else f"{report.damage}; {text}"
+        if damage.step is not None and (
+            report.damage_step is None or damage.step < report.damage_step
+        ):
+            report.damage_step = damage.step
+        if report.damage_offset is None:
+            report.damage_offset = damage.offset
+    elif not log.complete:
+        complete = False
+        why = (
+            f"{name}the log was not closed (the run crashed or was killed, or the file was "
+            f"cut): without its summary it cannot prove that nothing follows its last step"
         )
-    elif not log.closed_cleanly or end is None:
-        why = "the log was not closed (the run crashed or was killed, or the file was cut)"
-        if log.damage:
-            why += f"; reading stopped at {log.damage}"
-        report.truncated = True
-        report.truncated_detail = f"{why}; replayed up to its last complete step, {last_text}"
         if log.incomplete_tail is not None:
-            report.truncated_detail += f" (step {log.incomplete_tail} was only partly written)"
-    elif end.get("complete") != "true":
-        reason = end.get("reason") or "no reason given"
-        report.notes.append(
-            f"the logged run did not finish: stopped at step "
-            f"{end.get('stopped_at') or '?'} ({reason})"
-        )
+            why += f" (step {log.incomplete_tail} was only partly written)"
+    else:
+        complete = True
+        end = log.end or {}
+        if end.get("complete") != "true":
+            reason = end.get("reason") or "no reason given"
+            report.notes.append(
+                f"{name}the logged run did not finish: stopped at step "
+                f"{end.get('stopped_at') or '?'} ({reason})"
+            )
+    if complete:
+        return
+    report.complete = False
+    report.truncated = True
+    hint = (
+        "--partial accepted the complete steps before that"
+        if partial
+        else "--partial checks the complete steps before that; `isaac recover` writes them "
+        "as a clean log"
+    )
+    detail = f"{why}; {hint}"
+    report.truncated_detail = (
+        detail if not report.truncated_detail else f"{report.truncated_detail}; {detail}"
+    )
 
 
 # ---------------------------------------------------------------------------------------------
 # replay
 
 
-def _logged_record(raw: RawStep) -> StepRecord:
+def _logged_record(raw: RawStep, path: str, n_bodies: int) -> StepRecord:
+    """The logged state of a step, to go on from (LogError if it does not decode, does not
+    fit together or is not a state of this scene's ``n_bodies`` bodies)."""
     try:
         bodies = S.decode("Bodies", raw.messages["/bodies"])
         contacts = S.decode("Contacts", raw.messages["/contacts"])
-        return record_from_messages(bodies, contacts)
-    except (S.WireError, UnicodeDecodeError, ValueError) as exc:
-        raise LogError(f"step {raw.step}: the logged state does not decode ({exc})") from None
+        record = record_from_messages(bodies, contacts)
+    except DECODE_ERRORS as exc:
+        raise LogError(
+            f"{path}: damaged log: step {raw.step}: the logged state does not decode ({exc})"
+        ) from None
+    if record.position.shape[0] != n_bodies or record.step != raw.step:
+        raise LogError(
+            f"{path}: damaged log: step {raw.step}: the logged state is step {record.step} of "
+            f"{record.position.shape[0]} bodies; the scene has {n_bodies}"
+        )
+    return record
 
 
 def _compare_step(
@@ -166,9 +208,14 @@ def _compare_step(
     tolerance: float | None,
     report: Report,
     *,
+    path: str,
+    paths: tuple[str, str] | None = None,
     sides: tuple[str, str] = ("logged", "replayed"),
 ) -> tuple[bool, bool]:
-    """Compare one step's payloads. Returns (bytes all equal, beyond tolerance somewhere)."""
+    """Compare one step's payloads. Returns (bytes all equal, beyond tolerance somewhere).
+
+    LogError ("damaged log", naming ``path``, or ``paths[side]`` for a diff) if a payload that
+    differs does not decode or its arrays do not fit together."""
     found = []
     equal = True
     for topic in _CHANNEL_ORDER:
@@ -196,7 +243,13 @@ def _compare_step(
         if mine == theirs:
             continue
         equal = False
-        d, max_ulps = locate(topic, raw.step, theirs, mine, names, tolerance)
+        try:
+            d, max_ulps = locate(topic, raw.step, theirs, mine, names, tolerance)
+        except MalformedMessage as exc:
+            where = paths[exc.side] if paths else path
+            raise LogError(
+                f"{where}: damaged log: step {raw.step}: the {topic} message {exc}"
+            ) from None
         if max_ulps is not None:
             report.max_ulps_seen = (
                 max_ulps if report.max_ulps_seen is None else max(report.max_ulps_seen, max_ulps)
@@ -268,6 +321,7 @@ def replay_log(
     all_steps: bool = False,
     max_reported: int = DEFAULT_MAX_REPORTED,
     on_step: Callable[[int], None] | None = None,
+    partial: bool = False,
 ) -> Report:
     """Re-simulate the log at ``path`` from its embedded scene and compare every step.
 
@@ -277,8 +331,12 @@ def replay_log(
         ``|logged - replayed| <= tolerance * (1 + |logged|)`` (integers and counts stay exact).
     all_steps: go on after a divergence (from the logged state) and list every differing step,
         at most ``max_reported`` of them. on_step: called with each step index (progress).
+    partial: accept a damaged or never-closed log checked up to its last complete step before
+        the damage (verdict ``partial``, exit status 0); without it such a log is ``damaged``
+        or ``incomplete`` (exit status 1), never ``identical``.
     Raises LogError / SceneError for a file that is not a readable ISAAC log or whose scene is
-    invalid; a divergence is reported, not raised.
+    invalid, whose messages are malformed, or that holds no step to compare (exit status 2); a
+    divergence or damage found while comparing is reported, not raised.
     """
     from isaac.engine.simulation import Simulation  # loads the compiled kernels
 
@@ -327,7 +385,7 @@ def replay_log(
                     report.notes.append(
                         f"the log starts at step {raw.step}: replayed from its state"
                     )
-                keyframe = _logged_record(raw)
+                keyframe = _logged_record(raw, path, len(names))
                 sim.resume(keyframe)
                 last_exists = keyframe.exists.copy()
                 report.first_step = raw.step + 1
@@ -359,7 +417,7 @@ def replay_log(
                 if not go_on:
                     report.stopped_early = True
                     break
-                sim.resume(_logged_record(raw))
+                sim.resume(_logged_record(raw, path, len(names)))
                 last_exists = sim.state.exists.copy()
                 continue
             ours = encoder.encode(record)
@@ -367,7 +425,7 @@ def replay_log(
                 ours["/world"] = encode_world(model, record.step, record.time, record.exists)
                 last_exists = record.exists.copy()
             report.steps_compared += 1
-            equal, beyond = _compare_step(raw, ours, names, tolerance, report)
+            equal, beyond = _compare_step(raw, ours, names, tolerance, report, path=path)
             if on_step is not None:
                 on_step(raw.step)
             if equal:
@@ -376,7 +434,7 @@ def replay_log(
                 report.stopped_early = True
                 break
             # restart from the logged state so the next step is checked on its own
-            logged = _logged_record(raw)
+            logged = _logged_record(raw, path, len(names))
             sim.resume(logged)
             last_exists = np.array(logged.exists, dtype=bool)
     finally:
@@ -391,17 +449,30 @@ def replay_log(
         report.last_step = last_step
     elif report.first_step is not None:
         report.first_step = None
-    if from_step is not None and last_step is None:
-        raise LogError(f"{path}: step {from_step} is not in the log")
-    if not report.stopped_early and (to_step is None or last_step is None or last_step < to_step):
-        _truncation(log, last_step, report)
+    if not report.stopped_early:
+        _completeness(log, report, to_step=to_step, partial=partial)
         if (
             to_step is not None
-            and (last_step is None or last_step < to_step)
-            and not report.truncated
+            and last_step is not None
+            and last_step < to_step
+            and report.complete
         ):
             report.notes.append(f"the log ends at step {last_step}, before --to-step {to_step}")
+    if report.steps_compared == 0 and not report.diverged:
+        raise LogError(f"{path}: {_nothing_compared(log, from_step, last_step)}")
     return report
+
+
+def _nothing_compared(log: RawLog, from_step: int | None, last_step: int | None) -> str:
+    """Why a replay or diff compared no step (a zero-step comparison is never identical)."""
+    damage = f" (the log is damaged: {log.damage})" if log.damage else ""
+    if from_step is not None and last_step is None:
+        return f"step {from_step} is not in the log{damage}"
+    if last_step is not None:
+        return f"nothing to compare after step {last_step}, the last complete step{damage}"
+    if log.damage is not None:
+        return f"damaged log, no complete step: {log.damage}"
+    return "the log holds no complete step (nothing to compare)"
 
 
 # ---------------------------------------------------------------------------------------------
@@ -432,11 +503,14 @@ def diff_logs(
     tolerance: float | None = None,
     all_steps: bool = False,
     max_reported: int = DEFAULT_MAX_REPORTED,
+    partial: bool = False,
 ) -> Report:
     """Compare two logs of the same scene step by step, channel by channel, like `replay_log`.
 
     In the report, "logged" is log A and "replayed" is log B. Steps present in one complete log
-    only are a divergence; when one log is truncated the comparison stops at its end (noted).
+    only are a divergence. Both logs must be whole (every step they claim, intact) for the
+    verdict ``identical``; when one is damaged or was never closed the comparison stops at its
+    end and the verdict is ``damaged`` or ``incomplete`` (``partial`` with ``partial=True``).
     """
     log_a, log_b = RawLog(path_a), RawLog(path_b)
     scene_a, _ = load_embedded_scene(log_a)
@@ -457,12 +531,13 @@ def diff_logs(
     try:
         for step, ra, rb in _pairs(steps_a, steps_b):
             if ra is None or rb is None:
-                # one log ends (or skips) here: consume the other to see whether it was cut
+                # one log ends (or skips) here: read the other through to learn whether it
+                # was cut or damaged, or really holds fewer steps
                 for it in (steps_a, steps_b):
                     for _ in it:
                         pass
                 short, other = (log_a, "A") if ra is None else (log_b, "B")
-                if short.closed_cleanly and short.end is not None:
+                if short.complete or (short.damage is None and not short.read_through):
                     report.add(
                         [
                             Divergence(
@@ -482,7 +557,14 @@ def diff_logs(
             last_step = step
             report.steps_compared += 1
             _equal, beyond = _compare_step(
-                ra, rb.messages, names, tolerance, report, sides=("in A", "in B")
+                ra,
+                rb.messages,
+                names,
+                tolerance,
+                report,
+                path=path_a,
+                paths=(path_a, path_b),
+                sides=("in A", "in B"),
             )
             if beyond and not go_on:
                 report.stopped_early = True
@@ -496,14 +578,8 @@ def diff_logs(
         report.steps_per_s = report.steps_compared / report.elapsed_s
     if not report.stopped_early:
         for label, log in (("A", log_a), ("B", log_b)):
-            sub = Report(mode="diff", logs=[])
-            _truncation(log, last_step, sub)
-            if sub.truncated:
-                report.truncated = True
-                detail = sub.truncated_detail.replace(
-                    "replayed up to its last complete step", "compared up to the last common step"
-                )
-                joined = report.truncated_detail + "; " if report.truncated_detail else ""
-                report.truncated_detail = joined + f"log {label}: {detail}"
-            report.notes.extend(f"log {label}: {n}" for n in sub.notes)
+            _completeness(log, report, to_step=to_step, label=label, partial=partial)
+    if report.steps_compared == 0 and not report.diverged:
+        short = log_a if log_a.damage is not None or log_b.damage is None else log_b
+        raise LogError(f"{short.path}: {_nothing_compared(short, from_step, last_step)}")
     return report

@@ -9,6 +9,7 @@ from collections.abc import Callable
 import numpy as np
 
 from recorder import schema as S
+from recorder.reader import DECODE_ERRORS, WorldTable, check_bodies, contacts_from_message
 from replay.report import Divergence
 
 # per-row 2-vector fields, flattened x0, y0, x1, y1 ... in the log
@@ -59,6 +60,38 @@ def ulp_distances(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 # ---------------------------------------------------------------------------------------------
 # locating a difference inside two decoded messages
+
+
+class MalformedMessage(ValueError):
+    """A payload that does not decode, or whose arrays do not fit together (a damaged log, not
+    a divergence). ``side``: 0 for the logged payload (log A), 1 for the other."""
+
+    def __init__(self, side: int, why: str) -> None:
+        self.side = side
+        super().__init__(why)
+
+
+def _decoded(message: str, topic: str, payload: bytes, side: int, n_bodies: int) -> dict:
+    """``payload`` decoded, its arrays checked against each other and a contact's bodies
+    against the scene's ``n_bodies`` (MalformedMessage if not)."""
+    try:
+        d = S.decode(message, payload)
+        if topic == "/bodies":
+            check_bodies(d)
+        elif topic == "/world":
+            WorldTable.from_message(d)
+        elif topic == "/contacts":
+            contacts_from_message(d)
+            for side_name, idx in (("a", d["a"]), ("b", d["b"])):
+                if idx.size and int(idx.max()) >= n_bodies:
+                    row = int(np.flatnonzero(idx >= n_bodies)[0])
+                    raise ValueError(
+                        f"/contacts: row {row} names body {int(idx[row])} as {side_name}; "
+                        f"the scene has {n_bodies} bodies"
+                    )
+    except DECODE_ERRORS as exc:
+        raise MalformedMessage(side, f"is malformed ({exc})") from None
+    return d
 
 
 def _float_mismatch(la: np.ndarray, ra: np.ndarray, tolerance: float | None) -> np.ndarray:
@@ -176,15 +209,11 @@ def locate(
 
     Returns (the first difference beyond the tolerance or None, the largest ULP distance seen).
     Fields are visited in message order; within a field the lowest body / row index comes first.
+    Raises MalformedMessage if either payload does not decode or its arrays do not fit together.
     """
     message = S.TOPICS[topic]
-    try:
-        dl = S.decode(message, logged)
-    except (S.WireError, UnicodeDecodeError) as exc:
-        return Divergence(
-            step, topic, "error", detail=f"the logged message does not decode ({exc})"
-        ), None
-    dr = S.decode(message, replayed)
+    dl = _decoded(message, topic, logged, 0, len(names))
+    dr = _decoded(message, topic, replayed, 1, len(names))
     f = _Finder(step, topic, tolerance)
 
     def body(i: int) -> dict:

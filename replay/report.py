@@ -3,6 +3,19 @@
 `Report` holds what was compared and every divergence found (bounded); `format_text` renders the
 one-line verdict (and the divergence details) for the terminal, `to_json` the same for machines.
 
+The verdict (`Report.verdict`, docs/replay.md):
+- ``identical`` (exit 0): every step the log claims was there, whole and intact, and was
+  compared (at least one step), and no difference was found;
+- ``diverged`` (exit 1): a compared step differs;
+- ``damaged`` (exit 1): no difference in the steps compared, but the log is damaged (a chunk
+  whose CRC fails, a missing chunk, step or message, a summary that disagrees with the data):
+  ``damage`` names the first damaged or missing step (or byte);
+- ``incomplete`` (exit 1): no difference and no damage, but the log was never closed (a
+  ``.partial``): without its summary it cannot prove that nothing is missing after its last step;
+- ``partial`` (exit 0, only when asked with ``--partial``): a damaged or incomplete log whose
+  complete steps up to the damage were all identical; the verdict says how many steps were
+  checked out of how many the log claims.
+
 A `Divergence` names one place where the two sides differ at one step:
 - channel: ``/world``, ``/bodies``, ``/contacts``, ``/stats``, or ``simulation`` (the replay
   itself stopped with an error at a step the log holds);
@@ -61,9 +74,14 @@ class Report:
     mode: "replay" or "diff". logs: the file(s) read. first_step/last_step: the steps compared
     (None if none). tolerance: None for the bitwise check, else X (see docs/replay.md).
     divergences: the differences found, the first one first, at most ``max_reported`` steps
-    (``differing_steps`` counts them all). truncated: the (first) log was not complete; the
-    reason is in ``truncated_detail``. notes: version/platform differences and other remarks.
-    elapsed_s and steps_per_s: wall time of the comparison loop and its rate (steps/s).
+    (``differing_steps`` counts them all). complete: every step asked for (all the log claims,
+    or the ``--to-step`` window) was read whole and intact. damage: the first damaged or missing
+    step or byte, one line ("" if none; ``damage_step``, ``damage_offset``). claimed_steps: how
+    many steps the log claims (its ``isaac.end``; for a log never closed, the steps its readable
+    chunks hold), None if unknown. partial: ``--partial`` was given. truncated: not complete
+    (kept for older readers), the reason in ``truncated_detail``. notes: version/platform
+    differences and other remarks. elapsed_s and steps_per_s: wall time of the comparison loop
+    and its rate (steps/s).
     """
 
     mode: str
@@ -76,6 +94,12 @@ class Report:
     differing_steps: int = 0
     within_tolerance_steps: int = 0
     max_ulps_seen: int | None = None
+    complete: bool = True
+    damage: str = ""
+    damage_step: int | None = None
+    damage_offset: int | None = None
+    claimed_steps: int | None = None
+    partial: bool = False
     truncated: bool = False
     truncated_detail: str = ""
     stopped_early: bool = False
@@ -85,12 +109,28 @@ class Report:
     max_reported: int = DEFAULT_MAX_REPORTED
 
     @property
+    def diverged(self) -> bool:
+        return self.differing_steps > 0 or bool(self.divergences)
+
+    @property
     def identical(self) -> bool:
-        return self.differing_steps == 0 and not self.divergences
+        """Every step claimed was present, intact and compared, and none differs."""
+        return not self.diverged and self.complete and self.steps_compared > 0
+
+    @property
+    def verdict(self) -> str:
+        """``identical``, ``diverged``, ``damaged``, ``incomplete`` or ``partial`` (above)."""
+        if self.diverged:
+            return "diverged"
+        if self.identical:
+            return "identical"
+        if self.partial and self.steps_compared > 0:
+            return "partial"
+        return "damaged" if self.damage else "incomplete"
 
     @property
     def exit_status(self) -> int:
-        return 0 if self.identical else 1
+        return 0 if self.verdict in ("identical", "partial") else 1
 
     def divergent_steps(self) -> list[int]:
         return sorted({d.step for d in self.divergences})
@@ -154,14 +194,15 @@ def format_text(report: Report, *, all_steps: bool = False) -> str:
         "identical" if report.tolerance is None else f"equal within tolerance {report.tolerance:g}"
     )
     verb = "replayed" if report.mode == "replay" else "compared"
-    if report.identical:
+    verdict = report.verdict
+    if verdict == "identical":
         extra = ""
         if report.tolerance is not None and report.within_tolerance_steps:
             extra = f"; {report.within_tolerance_steps} of them not bit-identical" + (
                 f", up to {report.max_ulps_seen} ULP" if report.max_ulps_seen else ""
             )
         lines.append(f"{what}: {verb} {report.steps_compared} steps ({span}) in {timing}{extra}")
-    else:
+    elif verdict == "diverged":
         first = report.divergences[0] if report.divergences else None
         at = f" at step {first.step}" if first else ""
         lines.append(
@@ -183,6 +224,24 @@ def format_text(report: Report, *, all_steps: bool = False) -> str:
             )
         if not all_steps and report.differing_steps > 1:
             lines.append("  (--all lists every differing step)")
+    else:
+        checked = "checked" if report.mode == "replay" else "compared"
+        of = "" if report.claimed_steps is None else f" of {report.claimed_steps:,}"
+        up_to = f", {what} up to step {report.last_step:,}" if report.last_step is not None else ""
+        counted = f"{report.steps_compared:,}{of} steps {checked}{up_to}"
+        if verdict == "partial":
+            lines.append(f"partial: {counted} ({timing})")
+        else:
+            if report.damage_step is not None:
+                where = f" at step {report.damage_step:,}"
+            elif report.damage_offset is not None:
+                where = f" at byte {report.damage_offset:,}"
+            else:
+                where = ""
+            head = "DAMAGED" if verdict == "damaged" else "INCOMPLETE"
+            lines.append(f"{head}{where}: {counted}; the log cannot be checked whole ({timing})")
+    if report.damage:
+        lines.append(f"  damaged: {report.damage}")
     if report.truncated:
         lines.append(f"  note: {report.truncated_detail}")
     for note in report.notes:
@@ -201,6 +260,7 @@ def to_json(report: Report) -> str:
     data = {
         "mode": report.mode,
         "logs": report.logs,
+        "verdict": report.verdict,
         "identical": report.identical,
         "exit_status": report.exit_status,
         "steps_compared": report.steps_compared,
@@ -210,6 +270,12 @@ def to_json(report: Report) -> str:
         "differing_steps": report.differing_steps,
         "within_tolerance_steps": report.within_tolerance_steps,
         "max_ulps_seen": report.max_ulps_seen,
+        "complete": report.complete,
+        "damage": report.damage,
+        "damage_step": report.damage_step,
+        "damage_offset": report.damage_offset,
+        "claimed_steps": report.claimed_steps,
+        "partial": report.partial,
         "truncated": report.truncated,
         "truncated_detail": report.truncated_detail,
         "stopped_early": report.stopped_early,

@@ -1,4 +1,11 @@
-"""The recorder's sub-commands: ``isaac inspect``, ``isaac view``, ``isaac recover``."""
+"""The recorder's sub-commands: ``isaac inspect``, ``isaac view``, ``isaac recover``.
+
+A damaged log (a chunk whose CRC fails, a missing or repeated step, a summary that disagrees with
+the data: `recorder.integrity`) is read up to the damage; ``inspect`` prints a ``damaged:`` line
+naming the first damaged or missing step (or byte), ``recover`` says what it could not salvage.
+A path that is not a regular file, or a log whose header or messages are malformed, is a
+one-line error (exit status 2).
+"""
 
 from __future__ import annotations
 
@@ -73,13 +80,15 @@ def _inspect(args: argparse.Namespace) -> int:
     )
     changes = max(s.world_changes - 1, 0)
     print(f"bodies   {n} ({concrete} concrete); bodies entered or left at {changes} step(s)")
+    claimed = log.claimed_steps
+    of = f" of the {claimed} the log claims" if claimed is not None and claimed != s.steps else ""
     if s.steps:
         print(
-            f"steps    {s.steps} (step {s.first_step} to {s.last_step}, "
+            f"steps    {s.steps}{of} (step {s.first_step} to {s.last_step}, "
             f"t = {_g(s.first_step * log.dt)} to {_g(s.last_step * log.dt)} s)"
         )
     else:
-        print("steps    0")
+        print(f"steps    0{of}")
     depth = f"{_g(s.max_depth)} m (step {s.max_depth_step})" if s.contacts else "-"
     impulse = f"{_g(s.max_impulse)} N s (step {s.max_impulse_step})" if s.contacts else "-"
     print(f"contacts {s.contacts} in all; max depth {depth}; largest impulse {impulse}")
@@ -88,7 +97,14 @@ def _inspect(args: argparse.Namespace) -> int:
             f"energy   start {_g(s.energy_start)} J, end {_g(s.energy_end)} J (kinetic + potential)"
         )
     end = log.end
-    if log.closed_cleanly and end is not None:
+    damage = log.damage
+    if damage is not None:
+        print(f"damaged: from {damage.at()}: {damage}")
+    last = s.last_step if s.steps else "none"
+    recover_hint = f"`isaac recover {args.log} OUT.mcap` writes a clean copy"
+    if damage is not None and log.closed_cleanly:
+        state = f"closed, but damaged (above); readable up to step {last}; {recover_hint}"
+    elif log.closed_cleanly and end is not None:
         if end.get("complete") == "true":
             state = "closed cleanly; run complete"
         else:
@@ -96,11 +112,7 @@ def _inspect(args: argparse.Namespace) -> int:
                 f": {end['reason']}" if end.get("reason") else ""
             )
     else:
-        last = s.last_step if s.steps else "none"
-        state = (
-            f"NOT closed (unfinished or damaged); readable up to step {last}; "
-            f"`isaac recover {args.log} OUT.mcap` writes a clean copy"
-        )
+        state = f"NOT closed (unfinished or damaged); readable up to step {last}; {recover_hint}"
     print(f"file     {state}")
     return 0
 
@@ -178,12 +190,15 @@ def cmd_recover(args: argparse.Namespace) -> int:
 
     if os.path.abspath(args.log) == os.path.abspath(args.out):
         raise LogError("the output must be a different file from the input")
-    kept, last = recover(args.log, args.out)
+    done = recover(args.log, args.out)
+    kept, last, lost = done.kept, done.last, done.lost
     print(
         f"recovered {kept} step(s)"
         + ("" if last is None else f" (up to step {last})")
         + f" into {args.out}"
     )
+    if lost:
+        print(f"could not salvage: {lost}")
     return 0
 
 
@@ -198,9 +213,12 @@ def _rerun_executable() -> str:
 
 
 def cmd_view(args: argparse.Namespace) -> int:
+    from recorder.mcap_records import check_regular
+
     path = args.log
     if not os.path.exists(path):
         raise LogError(f"{path}: no such file")
+    check_regular(path)  # a FIFO or a device would never end
     tmpdir = None
     if path.endswith(".mcap") or path.endswith(".mcap.partial"):
         from recorder.rerun_writer import mcap_to_rrd

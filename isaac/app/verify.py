@@ -1,7 +1,11 @@
 """The replay sub-commands: ``isaac replay LOG.mcap`` and ``isaac diff A.mcap B.mcap``.
 
-Exit status: 0 identical (or equal within ``--tolerance``), 1 diverged (the report says where),
-2 a bad file (not an ISAAC MCAP log, corrupt header, invalid embedded scene), as a one-line error.
+Exit status (docs/replay.md): 0 identical (or equal within ``--tolerance``): every step the log
+claims was there, intact, and compared; with ``--partial`` also a damaged or unfinished log
+whose readable steps were all identical. 1 diverged, or the log is damaged or was never closed
+(the report names the first divergence, or the first damaged or missing step). 2 an unusable
+file (not a regular file, not an ISAAC MCAP log, a corrupt header, an invalid embedded scene, a
+malformed message, no complete step to compare), as a one-line error.
 """
 
 from __future__ import annotations
@@ -45,6 +49,13 @@ def _common(p: argparse.ArgumentParser) -> None:
         help=f"with --all, list at most N differing steps (default {DEFAULT_MAX_REPORTED})",
     )
     p.add_argument(
+        "--partial",
+        action="store_true",
+        help="accept a damaged or unfinished (.partial) log checked up to its last complete "
+        "step before the damage: verdict 'partial: N of M steps checked', exit 0 when those "
+        "are identical (without it such a log fails, exit 1)",
+    )
+    p.add_argument(
         "--json",
         metavar="OUT.json",
         default=None,
@@ -58,11 +69,12 @@ def register(subparsers) -> None:
         help="re-simulate a log from its embedded scene and check it bit for bit",
         description="Re-simulate LOG.mcap from the scene, settings and versions embedded in it "
         "and compare every logged /bodies, /contacts and /stats message with the "
-        "re-simulated one. Exit 0 identical, 1 diverged, 2 bad file.",
+        "re-simulated one. Exit 0 identical (every step the log claims present, intact and "
+        "compared), 1 diverged, damaged or incomplete, 2 unusable file.",
     )
     r.add_argument(
         "log",
-        help="LOG.mcap (a truncated or .partial log is replayed up to its last complete step)",
+        help="LOG.mcap (a damaged, cut or .partial log fails unless --partial is given)",
     )
     _common(r)
     r.set_defaults(func=cmd_replay)
@@ -71,7 +83,8 @@ def register(subparsers) -> None:
         "diff",
         help="compare two logs of the same scene step by step",
         description="Compare A.mcap and B.mcap message by message (e.g. before and after a code "
-        "change). Exit 0 identical, 1 different, 2 bad file.",
+        "change). Exit 0 identical (both logs whole), 1 different, damaged or incomplete, "
+        "2 unusable file.",
     )
     d.add_argument("a", help="A.mcap")
     d.add_argument("b", help="B.mcap")
@@ -112,6 +125,7 @@ def cmd_replay(args: argparse.Namespace) -> int:
         tolerance=args.tolerance,
         all_steps=args.all_steps,
         max_reported=args.max_reported,
+        partial=args.partial,
     )
     return _finish(report, args)
 
@@ -128,5 +142,6 @@ def cmd_diff(args: argparse.Namespace) -> int:
         tolerance=args.tolerance,
         all_steps=args.all_steps,
         max_reported=args.max_reported,
+        partial=args.partial,
     )
     return _finish(report, args)

@@ -350,23 +350,28 @@ def test_a_consistently_altered_scene_replays_differently(stack_log, tmp_path, c
     assert status == 1 and "DIVERGED at step" in out
 
 
-def test_a_truncated_log_replays_up_to_its_last_complete_step(tmp_path, capsys):
+def test_a_truncated_log_fails_unless_partial_is_asked_for(tmp_path, capsys):
     path = tmp_path / "long.mcap"
     record(path, STACK, steps=400)  # 4 chunks of 100 steps
     data = path.read_bytes()
     cut = tmp_path / "cut.mcap"
     cut.write_bytes(data[: int(len(data) * 0.6)])
+    # the steps that were read are identical, but the log cannot prove the rest: a failure
     status, out, err = isaac(capsys, "replay", cut)
-    assert status == 0, out + err
-    first = out.splitlines()[0]
-    assert first.startswith("identical: replayed ")
+    assert status == 1, out + err
     report = replay_log(str(cut))
-    assert report.truncated and 0 < report.last_step < 400
-    assert f"last complete step, step {report.last_step}" in report.truncated_detail
-    assert "was not closed" in out
+    assert not report.identical and report.verdict == "damaged"
+    assert 0 < report.last_step < 400 and report.damage_step == report.last_step + 1
+    assert out.startswith(f"DAMAGED at step {report.damage_step}: ")
+    assert "damaged: " in out and "cut short" in out
+    # asked for, the complete steps before the cut are checked, and the verdict says so
+    status, out, err = isaac(capsys, "replay", cut, "--partial")
+    assert status == 0, out + err
+    n = report.last_step + 1
+    assert out.startswith(f"partial: {n:,} of {n:,} steps checked, identical up to step {n - 1}")
 
 
-def test_the_partial_log_of_an_abandoned_run_replays_with_a_note(tmp_path):
+def test_the_partial_log_of_an_abandoned_run_is_incomplete_unless_partial(tmp_path):
     scene, _ = scene_from(STACK)
     sim = Simulation(scene)
     path = tmp_path / "killed.mcap"
@@ -379,10 +384,14 @@ def test_the_partial_log_of_an_abandoned_run_replays_with_a_note(tmp_path):
     rec._abandon()
     partial = Path(str(path) + ".partial")
     assert partial.exists() and not path.exists()
+    # every chunk is intact, but without a summary the log cannot prove it is complete
     report = replay_log(str(partial))
-    assert report.identical and report.truncated
+    assert not report.identical and report.verdict == "incomplete" and report.exit_status == 1
     assert (report.first_step, report.last_step) == (0, 170)  # abandon() flushed the last chunk
     assert "was not closed" in report.truncated_detail
+    report = replay_log(str(partial), partial=True)
+    assert report.verdict == "partial" and report.exit_status == 0
+    assert (report.steps_compared, report.claimed_steps) == (171, 171)
 
 
 def test_a_corrupt_chunk_in_a_closed_log_is_reported_as_damage(tmp_path):
@@ -394,9 +403,9 @@ def test_a_corrupt_chunk_in_a_closed_log_is_reported_as_damage(tmp_path):
     bad = tmp_path / "bad.mcap"
     bad.write_bytes(bytes(data))
     report = replay_log(str(bad))
-    assert report.identical and report.truncated
-    assert report.truncated_detail.startswith("the log is damaged")
-    assert report.last_step < 400
+    assert not report.identical and report.verdict == "damaged" and report.exit_status == 1
+    assert (report.last_step, report.damage_step) == (199, 200)
+    assert "CRC" in report.damage and report.claimed_steps == 401
 
 
 # --- tolerance and versions ------------------------------------------------------------------
@@ -471,14 +480,17 @@ def test_diff_reports_the_first_step_where_two_logs_part(stack_log, tmp_path, ca
     assert any(d.channel == "/bodies" and d.step > 0 for d in later.divergences)
 
 
-def test_diff_against_a_truncated_log_compares_the_common_steps(tmp_path, capsys):
+def test_diff_against_a_truncated_log_fails_unless_partial(tmp_path, capsys):
     a, b = tmp_path / "a.mcap", tmp_path / "b.mcap"
     record(a, STACK, steps=300)
     data = a.read_bytes()
     b.write_bytes(data[: len(data) // 2])
     status, out, _ = isaac(capsys, "diff", a, b)
+    assert status == 1, out
+    assert out.startswith("DAMAGED at step ") and "log B: " in out
+    status, out, _ = isaac(capsys, "diff", a, b, "--partial")
     assert status == 0, out
-    assert "log B: the log was not closed" in out
+    assert out.startswith("partial: ") and "steps compared, identical up to step" in out
 
 
 def test_reading_ahead_keeps_the_order_and_raises_where_the_source_raised():
