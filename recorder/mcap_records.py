@@ -73,7 +73,6 @@ OP_DATA_END = 0x0F
 
 _RECORD_HEAD = struct.Struct("<BQ")  # opcode, length of the body that follows
 _MESSAGE_HEAD = struct.Struct("<HIQQ")  # channel id, sequence, log_time, publish_time (22 bytes)
-_CHANNEL_HEAD = struct.Struct("<HHI")  # id, schema id, topic length
 _CHUNK_HEAD = struct.Struct("<QQQII")  # start, end time, uncompressed size, crc, compression len
 
 _PARSERS = {

@@ -14,6 +14,7 @@ Used by ``isaac inspect`` / ``isaac recover`` / ``isaac view`` and by the replay
         s.record.position, s.record.contacts.impulse, s.stats["state_hash"]
     log.step(k)                          # one LoggedStep (LogError if absent)
     log.summary()                        # LogSummary: counts, extremes, energies
+    log.damage, log.claimed_steps        # after steps(): the first damage, what the log claims
 
 The file is read in order, within bounds (`recorder.mcap_records`: only a regular file, every
 length checked before it is allocated, every chunk CRC-checked), so a file that was never closed
