@@ -223,8 +223,8 @@ def line_of(node) -> int:
 
 
 def join_path(path: str, key: str) -> str:
-    if len(key) > MAX_QUOTED:
-        key = key[:MAX_QUOTED] + "..."
+    if len(key) > MAX_QUOTED or not key.isprintable():  # keep the message one short line
+        key = shown(key)
     return f"{path}.{key}" if path else key
 
 
