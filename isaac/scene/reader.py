@@ -375,17 +375,15 @@ class Reader:
             raise self.fail(f"expected a string, got {describe(node)}", node, path)
         return value
 
-    def name(self, node, path: str, *, max_length: int = MAX_NAME_LENGTH) -> str:
-        """A body or scene name; `max_length` lower for a generator's prefix (its bodies' names
-        add a suffix)."""
+    def name(self, node, path: str) -> str:
         value = scalar(node) if isinstance(node, ScalarNode) else None
         if isinstance(value, (int, float)) and not isinstance(value, bool):
             value = node.value  # `name: 7` is the name "7"
         else:
             value = self.string(node, path)
-        if not valid_name(value) or len(value) > max_length:
+        if not valid_name(value):
             raise self.fail(
-                f"a name must be 1 to {max_length} printable characters, got {shown(value)}",
+                f"a name must be 1 to {MAX_NAME_LENGTH} printable characters, got {shown(value)}",
                 node,
                 path,
             )
