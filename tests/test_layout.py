@@ -179,3 +179,20 @@ def test_every_subpackage_says_what_it_holds_and_may_import():
     for package in ("isaac.scene", "isaac.engine", "isaac.app", "recorder", "replay"):
         doc = ast.get_docstring(ast.parse(MODULES[package].read_text())) or ""
         assert "import" in doc.lower(), f"{package}/__init__.py does not say what it may import"
+
+
+def test_isaac_check_and_help_load_no_compiled_code():
+    # checking a scene is the scene layer's work: numba (and its ~1 s, 330 MB import) stays out
+    import subprocess
+    import sys
+
+    code = (
+        "import sys; from isaac.app.cli import main; "
+        "status = main(['check', 'scenes/pile.yaml']); "
+        "print('numba' in sys.modules); sys.exit(status)"
+    )
+    done = subprocess.run(
+        [sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=120
+    )
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.strip().splitlines()[-1] == "False"

@@ -8,7 +8,6 @@ import signal
 import sys
 import time
 
-from isaac.engine import diagnostics
 from isaac.errors import IsaacError, LogError, SimulationError
 from isaac.scene import load_scene
 
@@ -260,5 +259,7 @@ def cmd_run(args: argparse.Namespace) -> int:
 
 
 def _energy(sim, record) -> float:
+    from isaac.engine import diagnostics  # compiled kernels: `isaac check` does without them
+
     totals = diagnostics.summary(sim.model, record, sim.scene.world.gravity)
     return totals.kinetic_energy + totals.potential_energy

@@ -8,11 +8,12 @@ import math
 import numpy as np
 
 from isaac.app.tradeoff.trajectory import Trajectory
-from isaac.engine import diagnostics
 from isaac.scene import Scene
 
 
 def _series(scene: Scene, model, traj: Trajectory) -> dict[str, np.ndarray]:
+    from isaac.engine import diagnostics  # compiled: not loaded for the command line's --help
+
     g = scene.world.gravity
     energy, momentum = [], []
     for k in range(traj.times.shape[0]):
