@@ -29,6 +29,7 @@ short, a contact naming a body that does not exist) raises LogError ("damaged lo
 
 from __future__ import annotations
 
+import contextlib
 import json
 import math
 import os
@@ -530,48 +531,67 @@ def recover(src: str, dst: str) -> Recovered:
         out = open(tmp, "wb")
     except OSError as exc:
         raise LogError(f"cannot write {tmp}: {exc.strerror}") from exc
-    with out:
-        writer = Writer(
-            out,
-            chunk_size=256 * 1024,
-            compression=COMPRESSION.get(compression, COMPRESSION["none"]),
-        )
-        header = log.header
-        writer.start(
-            profile=header.profile if header else "isaac",
-            library=header.library if header else "isaac-recorder",
-        )
-        # metadata and attachments first, as the writer puts them
-        for record in log._header_records:
-            if isinstance(record, Metadata):
-                writer.add_metadata(record.name, dict(record.metadata))
-            else:
-                writer.add_attachment(
-                    record.create_time, record.log_time, record.name, record.media_type, record.data
-                )
-        count = _copy_steps(src, writer, first, last)
-        end = reader.end if (lost is None and reader.end is not None) else None
-        if end is None:
-            end = end_metadata(
-                complete=False,
-                steps=count,
-                last_step=last,
-                stopped_at=last + 1,
-                reason="recovered from a log that was not closed"
-                if lost is None or not log.closed_cleanly
-                else f"recovered from a damaged log: {lost}",
+    try:
+        with out:
+            writer = Writer(
+                out,
+                chunk_size=256 * 1024,
+                compression=COMPRESSION.get(compression, COMPRESSION["none"]),
             )
-            end["recovered"] = "true"
-        writer.add_metadata(META_END, end)
-        writer.finish()
-    os.replace(tmp, dst)
+            header = log.header
+            writer.start(
+                profile=header.profile if header else "isaac",
+                library=header.library if header else "isaac-recorder",
+            )
+            # metadata and attachments first, as the writer puts them
+            for record in log._header_records:
+                if isinstance(record, Metadata):
+                    writer.add_metadata(record.name, dict(record.metadata))
+                else:
+                    writer.add_attachment(
+                        record.create_time,
+                        record.log_time,
+                        record.name,
+                        record.media_type,
+                        record.data,
+                    )
+            count = _copy_steps(src, writer, first, last)
+            end = reader.end if (lost is None and reader.end is not None) else None
+            if end is None:
+                end = end_metadata(
+                    complete=False,
+                    steps=count,
+                    last_step=last,
+                    stopped_at=last + 1,
+                    reason="recovered from a log that was not closed"
+                    if lost is None or not log.closed_cleanly
+                    else f"recovered from a damaged log: {lost}",
+                )
+                end["recovered"] = "true"
+            writer.add_metadata(META_END, end)
+            writer.finish()
+    except BaseException as exc:
+        # never leave a half-written copy behind
+        out.close()
+        with contextlib.suppress(OSError):
+            os.unlink(tmp)
+        if isinstance(exc, OSError):
+            raise LogError(f"cannot write {tmp}: {exc.strerror or exc}") from None
+        raise
+    try:
+        os.replace(tmp, dst)
+    except OSError as exc:
+        os.unlink(tmp)
+        raise LogError(f"cannot write {dst}: {exc.strerror or exc}") from None
     return Recovered(count, last, lost)
 
 
 def _lost(reader: StepReader) -> str | None:
     """What `recover` cannot salvage, in one line (None: nothing)."""
     parts = []
-    if reader.damage is not None:
+    if reader.damage is not None and reader.damage.step is None:
+        parts.append(f"{reader.damage} (every complete step read was kept)")
+    elif reader.damage is not None:
         parts.append(f"{reader.damage.at()} and after: {reader.damage}")
     elif reader.tail is not None:
         parts.append(f"step {reader.tail}, only partly written")

@@ -234,7 +234,10 @@ def _crafted_content(clean: Path, rng: np.random.Generator, path: Path) -> None:
         scalars = [k for k, v in target.items() if isinstance(v, (int, float)) and k != "step"]
         if how == 4 or not arrays:
             k = str(rng.choice(scalars))
-            target[k] = type(target[k])(rng.choice([0, -1, 2**31, 1e308, float("nan")]))
+            if isinstance(target[k], float):
+                target[k] = float(rng.choice([0.0, -1.0, 1e308, np.inf, np.nan]))
+            else:
+                target[k] = int(rng.choice([0, 2**31, 2**32 - 1, 2**40]))
             return
         k = str(rng.choice(arrays))
         a = target[k]
