@@ -44,7 +44,7 @@ from recorder.mcap_writer import (
 )
 from recorder.reader import DECODE_ERRORS, record_from_messages
 from recorder.stats import compute_stats
-from replay.divergence import MalformedMessage, locate
+from replay.divergence import MalformedMessage, check_payload, locate
 from replay.reader import Prefetch, RawLog, RawStep
 from replay.report import DEFAULT_MAX_REPORTED, Divergence, Report
 
@@ -566,6 +566,16 @@ def diff_logs(
                 paths=(path_a, path_b),
                 sides=("in A", "in B"),
             )
+            # payloads equal in both logs were not decoded: check them once (two copies of a
+            # damaged log are not identical logs)
+            for topic, data in ra.messages.items():
+                if rb.messages.get(topic) == data:
+                    try:
+                        check_payload(topic, data, len(names))
+                    except MalformedMessage as exc:
+                        raise LogError(
+                            f"{path_a}: damaged log: step {step}: the {topic} message {exc}"
+                        ) from None
             if beyond and not go_on:
                 report.stopped_early = True
                 break

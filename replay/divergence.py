@@ -197,6 +197,12 @@ class _Finder:
         return self.first
 
 
+def check_payload(topic: str, payload: bytes, n_bodies: int) -> None:
+    """MalformedMessage unless ``payload`` decodes as ``topic`` with arrays that fit together
+    (for payloads equal on both sides of a diff, which `locate` never sees)."""
+    _decoded(S.TOPICS[topic], topic, payload, 0, n_bodies)
+
+
 def locate(
     topic: str,
     step: int,

@@ -75,6 +75,7 @@ def _commands(path: Path, clean: Path, tmp: Path) -> list[list]:
         ["replay", path, "--partial"],
         ["diff", clean, path],
         ["diff", path, clean],
+        ["diff", path, path],
         ["recover", path, tmp / "recovered.mcap"],
     ]
 
