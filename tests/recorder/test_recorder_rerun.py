@@ -85,6 +85,22 @@ def test_mcap_to_rrd_conversion_keeps_every_step(tmp_path):
     assert {k: len(v) for k, v in points.items()} == {r.step: len(r.contacts) for r in records}
 
 
+def _wait_for_the_writer(partial: Path, timeout: float = 120.0) -> None:
+    """Until the writer process that outlived its run has written out the steps it was handed:
+    it holds the .partial's flock until it exits (recorder/outputs.py)."""
+    import fcntl
+
+    deadline = time.time() + timeout
+    with open(partial, "rb") as f:
+        while True:
+            try:
+                fcntl.flock(f.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
+                return
+            except BlockingIOError:
+                assert time.time() < deadline, "the writer process never let the file go"
+                time.sleep(0.1)
+
+
 def test_isaac_run_killed_with_sigkill_leaves_a_recoverable_log(tmp_path):
     pytest.importorskip("isaac.engine.simulation")
     out = tmp_path / "pile.mcap"
@@ -119,6 +135,7 @@ def test_isaac_run_killed_with_sigkill_leaves_a_recoverable_log(tmp_path):
     finally:
         os.kill(proc.pid, signal.SIGKILL)
         proc.wait()
+    _wait_for_the_writer(partial)
     log = LogReader(str(partial))
     got = [s.step for s in log.steps()]
     # every step up to the last flush (after steps 0, 99, 199, ...; 256 KiB chunks may add more)
