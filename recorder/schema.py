@@ -317,6 +317,8 @@ def decode(message: str, buf: bytes) -> dict:
             else:
                 raise WireError(f"{message}.{name}: wrong wire type")
             if not repeated:
+                if value.size == 0:  # a packed scalar field with no value
+                    raise WireError(f"{message}.{name}: empty value")
                 value = value[0].item()
         elif typ == "bool":
             if kind == "L":

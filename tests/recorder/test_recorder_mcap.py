@@ -436,3 +436,14 @@ def test_compressed_logs_read_back_and_recover(tmp_path, compression):
     assert out.returncode == 0, out.stderr
     got = [s.step for s in LogReader(str(tmp_path / "fixed.mcap")).steps()]
     assert got[: len(expected)] == expected and got == list(range(len(got)))
+
+
+def test_an_empty_packed_scalar_is_a_wire_error_not_an_index_error():
+    # a crafted message may give a scalar double field as an empty length-delimited value
+    from recorder import schema as S
+
+    for message, fields in S.MESSAGES.items():
+        for name, number, typ, repeated in fields:
+            if typ == "double" and not repeated:
+                with pytest.raises(S.WireError, match="empty value"):
+                    S.decode(message, bytes([(number << 3) | 2, 0]))
