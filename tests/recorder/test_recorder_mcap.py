@@ -443,7 +443,7 @@ def test_an_empty_packed_scalar_is_a_wire_error_not_an_index_error():
     from recorder import schema as S
 
     for message, fields in S.MESSAGES.items():
-        for name, number, typ, repeated in fields:
+        for _name, number, typ, repeated in fields:
             if typ == "double" and not repeated:
                 with pytest.raises(S.WireError, match="empty value"):
                     S.decode(message, bytes([(number << 3) | 2, 0]))
