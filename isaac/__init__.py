@@ -38,6 +38,11 @@ _EXPORTS = {
 __all__ = ["__version__", *_EXPORTS]
 
 
+def __dir__() -> list[str]:
+    """The public names (imported on first use), for dir(isaac) and completion."""
+    return sorted(__all__)
+
+
 def __getattr__(name: str):
     module = _EXPORTS.get(name)
     if module is None:

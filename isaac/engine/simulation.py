@@ -259,12 +259,24 @@ class Simulation:
         )
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, repr=False)
 class BodyView:
     """A thin window onto one body of a simulation (SI units, world frame)."""
 
     sim: Simulation
     index: int
+
+    def __repr__(self) -> str:
+        s = self.sim.state
+        i = self.index
+        kind = "concrete" if self.sim.model.concrete[i] else f"{self.mass:.6g} kg"
+        return (
+            f"<BodyView {self.name!r} (index {i}, {kind}) at step {s.step}: "
+            f"position ({s.position[i, 0]:.6g}, {s.position[i, 1]:.6g}) m, "
+            f"angle {s.angle[i]:.6g} rad, velocity ({s.velocity[i, 0]:.6g}, "
+            f"{s.velocity[i, 1]:.6g}) m/s, angular velocity {s.angular_velocity[i]:.6g} rad/s"
+            f"{'' if s.exists[i] else ', not in the scene'}>"
+        )
 
     @property
     def name(self) -> str:

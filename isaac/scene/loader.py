@@ -140,7 +140,7 @@ def _read_shape(r: Reader, node, path: str) -> tuple[tuple[float, float], ...]:
     kind, (_, value) = next(iter(m.items()))
     path = join_path(path, kind)
     if kind == "box":
-        return _box(*r.pair(value, path, MIN_SIZE, MAX_SIZE))
+        return _box(*r.pair(value, path, MIN_SIZE, MAX_SIZE, names="w, h"))
     if kind == "regular":
         p = r.mapping(value, path, ("sides", "radius", "phase"))
         for key in ("sides", "radius"):
@@ -269,7 +269,7 @@ def _read_pyramid(r: Reader, node, path: str) -> tuple[dict, int]:
     ground = optional(r.boolean, m, "ground", path, True)
     options = dict(
         rows=rows,
-        box=r.pair(m["box"][1], join_path(path, "box"), MIN_SIZE, MAX_SIZE),
+        box=r.pair(m["box"][1], join_path(path, "box"), MIN_SIZE, MAX_SIZE, names="w, h"),
         base=optional(r.pair, m, "base", path, (0.0, 0.0), -MAX_COORDINATE, MAX_COORDINATE),
         spacing=optional(r.number, m, "spacing", path, 0.0, 0.0, MAX_SIZE),
         name=_prefix(

@@ -204,7 +204,10 @@ def _reason(code: int, given: np.ndarray, oriented: np.ndarray, flipped: bool) -
             outgoing[:, 0], outgoing[:, 1]
         )
         bad = as_given(int(np.argmin(cross / lengths)))
-        return f"the polygon is not convex (it turns inwards at vertex {bad})"
+        return (
+            f"the polygon is not convex (it turns inwards at vertex {bad}, {given[bad].tolist()};"
+            f" vertices count from 0)"
+        )
     area = float(_signed_areas(oriented[None])[0])
     span = oriented.max(axis=0) - oriented.min(axis=0)
     size = float(np.hypot(span[0], span[1]))

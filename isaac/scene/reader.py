@@ -38,6 +38,10 @@ _INT_RE = re.compile(r"[-+]?[0-9]+\Z")
 _FLOAT_RE = re.compile(r"[-+]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][-+]?[0-9]+)?\Z")
 _NONFINITE_RE = re.compile(r"[-+]?\.?(?:nan|inf|infinity)\Z", re.IGNORECASE)
 _NULLS = ("null", "~", "")
+_BOOLEAN_SPELLINGS = {
+    **dict.fromkeys(("true", "yes", "on", "y"), "true"),
+    **dict.fromkeys(("false", "no", "off", "n"), "false"),
+}
 
 
 # --- nodes ----------------------------------------------------------------------------------
@@ -366,7 +370,10 @@ class Reader:
     def boolean(self, node, path: str) -> bool:
         value = scalar(node) if isinstance(node, ScalarNode) else None
         if not isinstance(value, bool):
-            raise self.fail(f"expected true or false, got {describe(node)}", node, path)
+            # YAML 1.1 and Python spellings that only `true` / `false` mean here
+            meant = _BOOLEAN_SPELLINGS.get(str(value).lower()) if isinstance(value, str) else None
+            hint = f" (did you mean {meant}?)" if meant else ""
+            raise self.fail(f"expected true or false, got {describe(node)}{hint}", node, path)
         return value
 
     def string(self, node, path: str) -> str:
@@ -400,8 +407,13 @@ class Reader:
         return value
 
     def pair(
-        self, node, path: str, lo: float, hi: float, *, lo_open: bool = False
+        self, node, path: str, lo: float, hi: float, *, lo_open: bool = False, names: str = "x, y"
     ) -> tuple[float, float]:
+        """Two numbers; `names` says in a refusal what they are (e.g. "w, h" for a box)."""
+        if isinstance(node, SequenceNode) and len(node.value) != 2:
+            raise self.fail(
+                f"expected exactly 2 numbers [{names}], got {len(node.value)}", node, path
+            )
         items = self.sequence(node, path, min_len=2, max_len=2, what="numbers")
         return (
             self.number(items[0], f"{path}[0]", lo, hi, lo_open=lo_open),
