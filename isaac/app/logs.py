@@ -10,6 +10,9 @@ one-line error (exit status 2).
 from __future__ import annotations
 
 import argparse
+import csv
+import difflib
+import json
 import os
 import shutil
 import subprocess
@@ -24,6 +27,16 @@ def register(subparsers) -> None:
     p = subparsers.add_parser("inspect", help="summarise an MCAP log (or list one step's contacts)")
     p.add_argument("log", help="LOG.mcap (a .partial file from a killed run works too)")
     p.add_argument("--step", type=int, metavar="K", help="print every contact of step K")
+    p.add_argument(
+        "--body", metavar="NAME", help="with --step: only the contacts of this body (a or b)"
+    )
+    p.add_argument(
+        "--format",
+        choices=("table", "csv", "json"),
+        default="table",
+        help="with --step: an aligned table (default), CSV (a header row, then one row a "
+        "contact) or JSON (the step's record, stats and contact rows)",
+    )
     p.set_defaults(func=cmd_inspect)
 
     v = subparsers.add_parser("view", help="open a recording in the Rerun viewer")
@@ -58,7 +71,9 @@ def _inspect(args: argparse.Namespace) -> int:
 
     log = LogReader(args.log)
     if args.step is not None:
-        return _print_step(log, args.step)
+        return _print_step(log, args.step, body=args.body, form=args.format)
+    if args.body is not None or args.format != "table":
+        raise LogError("--body and --format go with --step K")
     meta = log.metadata
     s = log.summary()
     world = log.world
@@ -139,21 +154,23 @@ _COLUMNS = (
 )
 
 
-def _print_step(log, k: int) -> int:
-    logged = log.step(k)
-    r, c = logged.record, logged.record.contacts
-    names = logged.world.names
-    print(f"step {k}, t = {_g(r.time)} s: {len(c)} contact(s)")
-    if logged.stats is not None:
-        st = logged.stats
-        print(
-            f"  kinetic {_g(st['kinetic_energy'])} J, potential {_g(st['potential_energy'])} J, "
-            f"state hash {st['state_hash'][:16]}..."
+def _logged_step(log, k: int):
+    """Step k of the log; a step it does not hold is one line naming the steps it does."""
+    try:
+        return log.step(k)
+    except LogError as exc:
+        if "is not in the log" not in str(exc):
+            raise
+        s = log.summary()
+        held = (
+            "no complete step" if s.first_step is None else (f"steps {s.first_step}..{s.last_step}")
         )
-    if not len(c):
-        return 0
+        raise LogError(f"{log.path}: step {k} is not in the log (it holds {held})") from None
+
+
+def _contact_rows(c, names, keep) -> list[tuple[str, ...]]:
     rows = []
-    for i in range(len(c)):
+    for i in keep:
         a, b = int(c.a[i]), int(c.b[i])
         rows.append(
             (
@@ -177,11 +194,86 @@ def _print_step(log, k: int) -> int:
                 _g(c.restitution[i]),
             )
         )
+    return rows
+
+
+def _print_step(log, k: int, *, body: str | None = None, form: str = "table") -> int:
+    logged = _logged_step(log, k)
+    r, c = logged.record, logged.record.contacts
+    names = logged.world.names
+    keep = range(len(c))
+    if body is not None:
+        if body not in names:
+            close = difflib.get_close_matches(body, [str(x) for x in names], n=1)
+            hint = f" (did you mean {close[0]!r}?)" if close else ""
+            raise LogError(f"{log.path}: no body named {body!r} in the log{hint}")
+        index = list(names).index(body)
+        keep = [i for i in keep if int(c.a[i]) == index or int(c.b[i]) == index]
+    if form == "json":
+        return _print_step_json(logged, names, keep)
+    rows = _contact_rows(c, names, keep)
+    if form == "csv":
+        out = csv.writer(sys.stdout, lineterminator="\n")
+        out.writerow(_COLUMNS)
+        out.writerows(rows)
+        return 0
+    which = "" if body is None else f" of {body!r}"
+    print(f"step {k}, t = {_g(r.time)} s: {len(rows)} contact(s){which}")
+    if logged.stats is not None:
+        st = logged.stats
+        print(
+            f"  kinetic {_g(st['kinetic_energy'])} J, potential {_g(st['potential_energy'])} J, "
+            f"state hash {st['state_hash'][:16]}..."
+        )
+    if not rows:
+        return 0
     widths = [max(len(h), *(len(row[j]) for row in rows)) for j, h in enumerate(_COLUMNS)]
     print("  ".join(h.rjust(wd) for h, wd in zip(_COLUMNS, widths)))
     for row in rows:
         print("  ".join(x.rjust(wd) for x, wd in zip(row, widths)))
     print("units: m (point, depth, push), N s (impulse, tangent_imp); normal from a to b")
+    return 0
+
+
+def _print_step_json(logged, names, keep) -> int:
+    """The step as JSON: exact floats (repr round-trips float64), SI units as in the log."""
+    r, c = logged.record, logged.record.contacts
+    keep = list(keep)
+
+    def rows(a):
+        return a[keep].tolist()
+
+    out = {
+        "step": int(r.step),
+        "time_s": float(r.time),
+        "stats": logged.stats,
+        "bodies": {
+            "name": [str(x) for x in names],
+            "position_m": r.position.tolist(),
+            "angle_rad": r.angle.tolist(),
+            "velocity_mps": r.velocity.tolist(),
+            "angular_velocity_radps": r.angular_velocity.tolist(),
+            "exists": r.exists.tolist(),
+        },
+        "contacts": {
+            "row": keep,
+            "substep": rows(c.substep),
+            "a": rows(c.a),
+            "b": rows(c.b),
+            "slot": rows(c.slot),
+            "feature": rows(c.feature),
+            "point_m": rows(c.point),
+            "normal": rows(c.normal),
+            "depth_m": rows(c.depth),
+            "push_a_m": rows(c.push_a),
+            "push_b_m": rows(c.push_b),
+            "impulse_Ns": rows(c.impulse),
+            "tangent_impulse_Ns": rows(c.tangent_impulse),
+            "restitution": rows(c.restitution),
+        },
+    }
+    json.dump(out, sys.stdout, allow_nan=False)
+    sys.stdout.write("\n")
     return 0
 
 
