@@ -27,7 +27,7 @@ import json
 import sys
 import time
 from collections.abc import Callable, Iterator
-from dataclasses import asdict
+from dataclasses import asdict, fields
 
 import numpy as np
 
@@ -479,6 +479,37 @@ def _nothing_compared(log: RawLog, from_step: int | None, last_step: int | None)
 # diff
 
 
+def same_bodies(scene_a: Scene, scene_b: Scene) -> bool:
+    """Whether two scenes have the same bodies by name and shape (in order): one scene, perhaps
+    under other settings."""
+    return [(b.name, b.vertices) for b in scene_a.bodies] == [
+        (b.name, b.vertices) for b in scene_b.bodies
+    ]
+
+
+MAX_LISTED_SETTINGS = 8
+
+
+def settings_differ(scene_a: Scene, scene_b: Scene) -> list[str]:
+    """``"key A, B"`` for each world setting and each body field (material, starting state)
+    that differs between two scenes with the same bodies; at most MAX_LISTED_SETTINGS, then a
+    count of the rest."""
+    out = []
+    for f in fields(scene_a.world):
+        va, vb = getattr(scene_a.world, f.name), getattr(scene_b.world, f.name)
+        if va != vb:
+            out.append(f"{f.name} {va!r}, {vb!r}")
+    if same_bodies(scene_a, scene_b):
+        for a, b in zip(scene_a.bodies, scene_b.bodies):
+            for f in fields(a):
+                va, vb = getattr(a, f.name), getattr(b, f.name)
+                if va != vb:
+                    out.append(f"{a.name}.{f.name} {va!r}, {vb!r}")
+    if len(out) > MAX_LISTED_SETTINGS:
+        out = out[:MAX_LISTED_SETTINGS] + [f"and {len(out) - MAX_LISTED_SETTINGS} more"]
+    return out
+
+
 def _pairs(a: Iterator[RawStep], b: Iterator[RawStep]):
     """Merge two step streams by step index: (step, raw_a or None, raw_b or None)."""
     sa, sb = next(a, None), next(b, None)
@@ -504,8 +535,13 @@ def diff_logs(
     all_steps: bool = False,
     max_reported: int = DEFAULT_MAX_REPORTED,
     partial: bool = False,
+    force: bool = False,
 ) -> Report:
     """Compare two logs of the same scene step by step, channel by channel, like `replay_log`.
+
+    Logs of different scenes (other body names or shapes) are a LogError unless `force`; logs of
+    one scene under other settings (world settings, or a body's material or starting state) are
+    compared, and the report lists what differs (`Report.settings_differ`).
 
     In the report, "logged" is log A and "replayed" is log B. Steps present in one complete log
     only are a divergence. Both logs must be whole (every step they claim, intact) for the
@@ -514,12 +550,20 @@ def diff_logs(
     """
     log_a, log_b = RawLog(path_a), RawLog(path_b)
     scene_a, _ = load_embedded_scene(log_a)
+    scene_b, _ = load_embedded_scene(log_b)
     names = [b.name for b in scene_a.bodies]
     report = Report(
         mode="diff", logs=[str(path_a), str(path_b)], tolerance=tolerance, max_reported=max_reported
     )
-    if log_a.metadata.get("scene_sha256") != log_b.metadata.get("scene_sha256"):
+    if not same_bodies(scene_a, scene_b):
+        if not force:
+            raise LogError(
+                f"{path_a} and {path_b} are logs of different scenes ({scene_a.name!r}, "
+                f"{len(scene_a.bodies)} bodies; {scene_b.name!r}, {len(scene_b.bodies)} bodies): "
+                f"pass --force to compare them anyway"
+            )
         report.notes.append("the two logs embed different scenes")
+    report.settings_differ = settings_differ(scene_a, scene_b)
     note = versions_note(log_a.metadata, log_b.metadata, what="in B", suggest=tolerance is None)
     if note:
         report.notes.append(note.replace("in the log", "in A"))

@@ -104,6 +104,8 @@ class Report:
     truncated_detail: str = ""
     stopped_early: bool = False
     notes: list = field(default_factory=list)
+    # what differs between the two logs' settings (a diff), printed before the divergences
+    settings_differ: list = field(default_factory=list)
     elapsed_s: float = 0.0
     steps_per_s: float = 0.0
     max_reported: int = DEFAULT_MAX_REPORTED
@@ -214,6 +216,8 @@ def format_text(report: Report, *, all_steps: bool = False) -> str:
             if all_steps
             else [d for d in report.divergences if first is not None and d.step == first.step]
         )
+        if report.settings_differ:
+            lines.append("  settings differ (A, B): " + "; ".join(report.settings_differ))
         labels = _labels(report)
         for d in shown:
             lines.append("  " + _describe(d, labels))
@@ -280,6 +284,7 @@ def to_json(report: Report) -> str:
         "truncated_detail": report.truncated_detail,
         "stopped_early": report.stopped_early,
         "notes": report.notes,
+        "settings_differ": report.settings_differ,
         "elapsed_s": report.elapsed_s,
         "steps_per_s": report.steps_per_s,
         "divergences": [

@@ -88,6 +88,9 @@ def register(subparsers) -> None:
     )
     d.add_argument("a", help="A.mcap")
     d.add_argument("b", help="B.mcap")
+    d.add_argument(
+        "--force", action="store_true", help="compare logs of different scenes all the same"
+    )
     _common(d)
     d.set_defaults(func=cmd_diff)
 
@@ -143,5 +146,6 @@ def cmd_diff(args: argparse.Namespace) -> int:
         all_steps=args.all_steps,
         max_reported=args.max_reported,
         partial=args.partial,
+        force=args.force,
     )
     return _finish(report, args)

@@ -237,7 +237,9 @@ def test_a_missing_contact_row_is_a_count_mismatch_not_a_crash(stack_log, tmp_pa
 def test_a_log_with_different_bodies_reports_a_count_mismatch(stack_log, tmp_path, capsys):
     a, b = tmp_path / "a.mcap", tmp_path / "b.mcap"
     record(b, "head_on", steps=10)  # 2 bodies against the stack's 4
-    status, out, _ = isaac(capsys, "diff", stack_log, b)
+    status, _, err = isaac(capsys, "diff", stack_log, b)
+    assert status == 2 and "are logs of different scenes" in err  # unless forced:
+    status, out, _ = isaac(capsys, "diff", stack_log, b, "--force")
     assert status == 1
     assert "step 0, /world: bodies count differs: A 4, B 2" in out
     assert "step 0, /bodies: bodies count differs: A 4, B 2" in out
@@ -465,7 +467,8 @@ def test_diff_reports_the_first_step_where_two_logs_part(stack_log, tmp_path, ca
     assert status == 1
     report = json.loads(out)
     assert report["mode"] == "diff" and report["divergences"]
-    assert "the two logs embed different scenes" in report["notes"]
+    # one scene under another material: compared, and what differs is listed
+    assert any(s.endswith("restitution 0.3, 0.35") for s in report["settings_differ"])
     # the scenes differ in one body's restitution: /world says so at step 0
     first = report["divergences"][0]
     assert (first["step"], first["channel"], first["body_name"], first["field"]) == (
