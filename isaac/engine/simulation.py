@@ -218,7 +218,11 @@ class Simulation:
 
     def run(self, steps: int | None = None, *, batch: int = 64) -> Iterator[StepRecord]:
         """A generator of the records of the next `steps` steps (default: the scene's
-        `world.steps`), computed `batch` steps per compiled call."""
+        `world.steps`), computed `batch` steps per compiled call.
+
+        The simulation runs ahead of what has been taken from the generator by up to
+        `batch - 1` steps: stopping early leaves it past the last record taken. `step()` takes
+        one step at a time; `resume(record)` goes back to any record, bit for bit."""
         for chunk in self.batches(steps, size=batch):
             for s in range(chunk.steps):
                 yield chunk.record(s)
