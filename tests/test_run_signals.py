@@ -11,6 +11,7 @@ import os
 import signal
 from pathlib import Path
 
+import pytest
 from close_gate import TINY_SCENE, held_in_close
 
 from recorder.reader import LogReader
@@ -33,15 +34,16 @@ def _assert_complete_log(path: Path) -> None:
     assert [s.step for s in log.steps()] == list(range(STEPS + 1))
 
 
-def test_sigterm_while_the_log_is_finished_lets_the_close_finish(tmp_path):
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGHUP])  # SIGHUP: the terminal closed
+def test_a_signal_while_the_log_is_finished_lets_the_close_finish(tmp_path, sig):
     scene = tmp_path / "tiny.yaml"
     scene.write_text(TINY_SCENE)
     mcap = tmp_path / "run.mcap"
     args = ("run", scene, "--quiet", "--steps", STEPS, "--mcap", mcap)
     with held_in_close(tmp_path, *args) as run:
-        os.kill(run.proc.pid, signal.SIGTERM)
+        os.kill(run.proc.pid, sig)
         status = run.release()
-    _assert_interrupted_while_finishing(run, status, "SIGTERM")
+    _assert_interrupted_while_finishing(run, status, signal.Signals(sig).name)
     _assert_complete_log(mcap)
 
 

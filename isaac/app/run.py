@@ -58,8 +58,13 @@ def cmd_check(args: argparse.Namespace) -> int:
     return 0
 
 
+# Ctrl-C, SIGTERM, and SIGHUP (the terminal closed): each stops the run between steps and lets
+# the files be finished
+_STOP_SIGNALS = (signal.SIGTERM, signal.SIGINT, signal.SIGHUP)
+
+
 class _StopRequest:
-    """Ctrl-C or SIGTERM, noted by the handler and acted on between steps, so a step and its
+    """Ctrl-C, SIGTERM or SIGHUP, noted by the handler and acted on between steps, so a step and its
     records (MCAP and Rerun alike) are always written whole before the files are closed.
 
     The handler stays until the files are closed: a signal while they are being finished is
@@ -148,7 +153,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     progress = None
     stop = _StopRequest()
     # handled from before the files are opened until they are closed (see _StopRequest)
-    previous = {sig: signal.signal(sig, stop) for sig in (signal.SIGTERM, signal.SIGINT)}
+    previous = {sig: signal.signal(sig, stop) for sig in _STOP_SIGNALS}
     stopped = None
     signal_in_close = None
     finished = False
