@@ -591,6 +591,7 @@ class Stepper:
         self._sized_for = -1
         self.carried = 0
         self._fit()
+        self._empty_batch = self.new_batch(0, 0)  # what an unrecorded call writes nothing into
         self._rows_per_step = 4 * self.n  # first guess at a batch's contact rows per step
 
     def _fit(self) -> None:
@@ -654,7 +655,7 @@ class Stepper:
         self._fit()  # `Simulation.detect` may have grown the workspace
         record = batch is not None
         if batch is None:
-            batch = self._no_batch()
+            batch = self._empty_batch
         pose = (state.position, state.angle, state.velocity, state.angular_velocity, state.exists)
         saved = (
             np.empty_like(state.position), np.empty_like(state.angle),
@@ -682,11 +683,6 @@ class Stepper:
                     at = batch[5][taken]
                     self._rows_per_step = max(4, -(-int(at) // taken))
                 return taken, body, field, batch if record else None
-
-    def _no_batch(self) -> tuple:
-        if not hasattr(self, "_empty_batch"):
-            self._empty_batch = self.new_batch(0, 0)
-        return self._empty_batch
 
 
 def _carry_arrays(rows: int) -> tuple:

@@ -76,6 +76,13 @@ class Contacts:
         return int(self.a.shape[0])
 
     @staticmethod
+    def concatenate(parts: list[Contacts]) -> Contacts:
+        """One Contacts of several parts' rows (sub-steps, or steps), in order."""
+        if len(parts) == 1:
+            return parts[0]
+        return Contacts(*(np.concatenate([getattr(p, f) for p in parts]) for f in CONTACT_FIELDS))
+
+    @staticmethod
     def empty() -> Contacts:
         i = np.zeros(0, dtype=np.int32)
         f = np.zeros(0, dtype=np.float64)
@@ -177,5 +184,8 @@ class StepBatch:
             np.stack([getattr(r, f) for r in records])
             for f in ("position", "angle", "velocity", "angular_velocity", "exists")
         ]
-        rows = [np.concatenate([getattr(r.contacts, f) for r in records]) for f in CONTACT_FIELDS]
-        return StepBatch(records[0].step, dt, (*state, offsets, *rows), len(records))
+        rows = Contacts.concatenate([r.contacts for r in records])
+        return StepBatch(
+            records[0].step, dt, (*state, offsets, *(getattr(rows, f) for f in CONTACT_FIELDS)),
+            len(records),
+        )  # fmt: skip

@@ -370,10 +370,4 @@ def step(
     if model.timed:
         time = state.step * dt
         state.exists[:] = (model.enters_at <= time) & (time < model.leaves_at)
-    return (parts[0] if len(parts) == 1 else concatenate(parts)), cache
-
-
-def concatenate(parts: list[Contacts]) -> Contacts:
-    """One Contacts of several sub-steps' rows, in sub-step order."""
-    fields = Contacts.__dataclass_fields__
-    return Contacts(**{f: np.concatenate([getattr(p, f) for p in parts]) for f in fields})
+    return Contacts.concatenate(parts), cache
