@@ -18,8 +18,8 @@ Output: bench/results/latest.jsonl (one JSON object a line: `meta`, every `run`,
 `row`s, `growth`, `startup`, `recording`, `targets`) and bench/results/latest.md (the tables),
 also printed. A run with any selection flag (`--quick`, `--scenes`, ...) writes partial.jsonl /
 partial.md instead, so the published results are always a full run. After a full run, if
-README.md holds the markers `<!-- bench:start -->` and `<!-- bench:end -->`, the tables replace
-what is between them (`--no-readme` to leave it alone).
+bench/README.md holds the markers `<!-- bench:start -->` and `<!-- bench:end -->`, the tables
+replace what is between them (`--no-readme` to leave it alone).
 """
 
 from __future__ import annotations
@@ -606,7 +606,7 @@ def parse_args(argv):
     p.add_argument(
         "--no-readme",
         action="store_true",
-        help="do not write the tables into README.md between the bench markers",
+        help="do not write the tables into bench/README.md between the bench markers",
     )
     p.add_argument("--timeout", type=float, default=600.0, help="per-process limit (s)")
     return p.parse_args(argv)
@@ -704,8 +704,8 @@ def main(argv: list[str] | None = None) -> int:
             f.write(json.dumps(obj, default=_json_default) + "\n")
     (out / f"{stem}.md").write_text(text + "\n")
     print(text)
-    if full and not args.no_readme and update_readme(text, ROOT / "README.md"):
-        log("bench: README.md table updated")
+    if full and not args.no_readme and update_readme(text, ROOT / "bench" / "README.md"):
+        log("bench: bench/README.md table updated")
     log(
         f"bench: {meta['elapsed_s']:.0f} s; wrote {out / (stem + '.jsonl')} and "
         f"{out / (stem + '.md')}"
