@@ -87,6 +87,11 @@ class Scratch(NamedTuple):
     expand: np.ndarray  # (n,) m, speculative reach
     pair_a: np.ndarray  # (pairs,) int64
     pair_b: np.ndarray
+    pair_spare: np.ndarray  # the broad phase's scratch (`find_pairs`)
+    sweep_index: np.ndarray
+    sweep_key: np.ndarray
+    sweep_table: np.ndarray
+    push_start: np.ndarray  # (n, 2) m, push-out's scratch
     a: np.ndarray  # (2 pairs,) int32
     b: np.ndarray
     feature: np.ndarray
@@ -212,6 +217,10 @@ def before_impulses(bodies, cfg, pose, work, carry, carried):
         pose.exists,
         work.pair_a,
         work.pair_b,
+        work.pair_spare,
+        work.sweep_index,
+        work.sweep_key,
+        work.sweep_table,
     )
     if pairs > work.pair_a.shape[0]:
         return -1, pairs
@@ -272,6 +281,7 @@ def before_impulses(bodies, cfg, pose, work, carry, carried):
         cfg.position_iterations,
         work.push_a,
         work.push_b,
+        work.push_start,
     )
     # 5. impulses come next; semi-implicit Euler puts gravity in first, so contacts see it
     if not cfg.explicit:
@@ -602,7 +612,8 @@ class Stepper:
             return
         self.scratch = tuple(
             Scratch(
-                w.vertices, w.normals, w.aabb, w.expand, w.pair_a, w.pair_b, w.a, w.b,
+                w.vertices, w.normals, w.aabb, w.expand, w.pair_a, w.pair_b, w.pair_spare,
+                w.sweep_index, w.sweep_key, w.sweep_table, w.push_start, w.a, w.b,
                 w.feature, w.slot, w.point, w.normal, w.depth, w.pair_depth, w.previous,
                 w.push_a, w.push_b, w.impulse, w.tangent, w.restitution,
             )

@@ -42,6 +42,7 @@ def push_out(
     iterations,
     c_push_a,
     c_push_b,
+    start,
 ):
     """Push each pair apart (on its slot-0 row) in `iterations` passes; positions in place.
 
@@ -51,9 +52,13 @@ def push_out(
     stack's push propagates through it. One pass is the seed's push.
     Writes push_a / push_b (m, world) per row, the total over the passes (zero on slot > 0 rows),
     and moves every row's point with its incident body (feature // 4096 == 0: the reference face
-    is a's, the point is on b).
+    is a's, the point is on b). start: (n, 2) scratch (the positions before the pushes).
     """
-    start = position.copy()
+    if rows == 0:
+        return
+    for i in range(position.shape[0]):
+        start[i, 0] = position[i, 0]
+        start[i, 1] = position[i, 1]
     for k in range(rows):
         c_push_a[k, 0] = 0.0
         c_push_a[k, 1] = 0.0

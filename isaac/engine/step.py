@@ -23,7 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from isaac.engine.broad_phase import find_pairs, speculative_reach
+from isaac.engine.broad_phase import SWEEP_INDEX_ROWS, find_pairs, speculative_reach
 from isaac.engine.geometry import transform
 from isaac.engine.integrate import add_gravity, advance_positions
 from isaac.engine.narrow_phase import collide_pairs, match_previous
@@ -106,12 +106,18 @@ class Workspace:
         self.aabb = np.zeros((n, 4))
         self.expand = np.zeros(n)
         self.movable = ~model.concrete
+        # the broad phase's and push-out's scratch (per body: a step allocates none of it)
+        self.sweep_index = np.zeros((SWEEP_INDEX_ROWS, n + 1), dtype=np.int64)
+        self.sweep_key = np.zeros(n)
+        self.sweep_table = np.zeros((n, 8))
+        self.push_start = np.zeros((n, 2))
         self.solver_table = np.zeros(0)  # the impulse solver's scratch, grown as it needs
         self._allocate(pair_capacity)
 
     def _allocate(self, pairs: int) -> None:
         self.pair_a = np.zeros(pairs, dtype=np.int64)
         self.pair_b = np.zeros(pairs, dtype=np.int64)
+        self.pair_spare = np.zeros(pairs, dtype=np.int64)
         rows = 2 * pairs
         self.a = np.zeros(rows, dtype=np.int32)
         self.b = np.zeros(rows, dtype=np.int32)
@@ -208,6 +214,10 @@ def detect(
             state.exists,
             work.pair_a,
             work.pair_b,
+            work.pair_spare,
+            work.sweep_index,
+            work.sweep_key,
+            work.sweep_table,
         )
         if pairs <= work.pair_a.shape[0]:
             break
@@ -328,6 +338,7 @@ def substep(
         cfg.position_iterations,
         work.push_a,
         work.push_b,
+        work.push_start,
     )
     # 5. impulses (semi-implicit Euler: gravity first, so contacts see it)
     if not cfg.explicit:

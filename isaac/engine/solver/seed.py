@@ -44,6 +44,8 @@ def solve_seed(
     c_push_b,
 ):
     """solve_contacts with the seed's solver (_seed_pass)."""
+    if rows == 0:  # nothing to solve: the velocities stay as they are
+        return
     n = velocity.shape[0]
     v = np.empty((n, 3))  # the velocities (vx, vy, w) and inverse masses, packed per body
     inv = np.empty((n, 2))

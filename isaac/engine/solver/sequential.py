@@ -79,6 +79,8 @@ def solve_sequential(
     accumulated impulses to c_impulse / c_tangent. (Several small kernels rather than one: numba
     compiles them in a fraction of the time.)
     """
+    if rows == 0:  # nothing to solve: the velocities stay as they are
+        return table
     n = velocity.shape[0]
     v = np.empty((n, 3))  # the velocities (vx, vy, w) and inverse masses, packed per body
     inv = np.empty((n, 2))
