@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from isaac.engine.records import CONTACT_FIELDS
+from isaac.engine.records import CONTACT_FIELDS, StepRecord
 from isaac.engine.simulation import Simulation
 from isaac.errors import SimulationError
 from isaac.scene import PRESETS, BodySpec, Scene, WorldSettings, generators, load_scene
@@ -177,3 +177,30 @@ def test_batch_arrays_are_read_only_views_of_one_batch():
     assert len(c) == batch.offsets[4] - batch.offsets[3]
     with pytest.raises(ValueError):
         record.contacts.impulse[...] = 0.0
+
+
+def test_advance_computes_the_last_steps_contacts_only_when_asked_and_exactly():
+    # advance records nothing; record() afterwards computes the last step again from its start
+    scene = _pile("balanced")
+    reference = _stepped(scene, 40)
+    sim = Simulation(scene)
+    sim.advance(25)
+    assert sim._contacts is None  # not computed yet
+    _same_record(reference[24], sim.record())
+    assert len(sim.record().contacts) > 0
+    sim.advance(3)
+    sim.advance(2)  # the pending contacts of the first call are never needed
+    _same_record(reference[29], sim.record())
+    after = [sim.step() for _ in range(10)]
+    for x, y in zip(reference[30:], after):
+        _same_record(x, y)
+
+
+def test_a_batch_record_pickles_as_a_plain_step_record_with_the_same_bits():
+    import pickle
+
+    sim = Simulation(_pile("balanced"))
+    record = next(sim.batches(8, size=8)).record(7)
+    copy = pickle.loads(pickle.dumps(record))
+    assert type(copy) is StepRecord and repr(copy).startswith("StepRecord(step=8")
+    _same_record(record, copy)

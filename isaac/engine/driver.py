@@ -485,6 +485,7 @@ def _run_steps(
     solver a driver does not use before numba compiles it)."""
     n = pose.position.shape[0]
     at = batch.offsets[start] if record else 0
+    last_carried = carried
     for s in range(k):
         _copy_pose(pose, saved_pose)
         _copy_carry(carry, saved_carry, carried)
@@ -519,10 +520,11 @@ def _run_steps(
         if status != DONE:
             _copy_pose(saved_pose, pose)
             _copy_carry(saved_carry, carry, step_carried)
-            return status, s, step_carried, body, field, need, table
+            return status, s, step_carried, body, field, need, table, step_carried
         if record:
             _keep_state(batch, start + s, pose, at)
-    return DONE, k, carried, -1, -1, 0, table
+        last_carried = step_carried
+    return DONE, k, carried, -1, -1, 0, table, last_carried
 
 
 @numba.njit(cache=True, nogil=True)
@@ -536,8 +538,10 @@ def run_steps_sequential(
     Every bundle arrives as a plain tuple of its fields (`Bodies`, `Settings`, `Pose`, `Scratch`,
     `Carry`, `Pose` and `Carry` of the same sizes for undoing a step, `Batch`); table: the
     solver's table; carried: how many Carry rows are valid. Returns (status, steps taken,
-    carried, body, field, pairs or rows needed, table): status DONE, or DIVERGED / NEED_PAIRS /
-    NEED_ROWS with the step that did it undone (body, field: `first_diverged`'s)."""
+    carried, body, field, pairs or rows needed, table, carried at the start of the last step):
+    status DONE, or DIVERGED / NEED_PAIRS / NEED_ROWS with the step that did it undone (body,
+    field: `first_diverged`'s). On return `saved_pose` / `saved_carry` hold the start of the
+    last step taken (or undone), which `Stepper.redo_last` computes again to record it."""
     return _run_steps(
         False, Bodies(*bodies), Settings(*cfg), Pose(*pose), Scratch(*work), Carry(*carry),
         Pose(*saved_pose), Carry(*saved_carry), Batch(*batch), table, start, carried, first, k,
@@ -600,6 +604,8 @@ class Stepper:
         self.substeps = int(s.substeps)
         self._sized_for = -1
         self.carried = 0
+        self._last_start = None  # (state index, carried) of the saved pose and carry, or None
+        self._empty_saved()
         self._fit()
         self._empty_batch = self.new_batch(0, 0)  # what an unrecorded call writes nothing into
         self._rows_per_step = 4 * self.n  # first guess at a batch's contact rows per step
@@ -619,6 +625,7 @@ class Stepper:
             )
         )  # fmt: skip
         old = getattr(self, "carry", None)
+        self._last_start = None  # the saved carry is rebuilt
         self.carry = _carry_arrays(rows)
         self.saved_carry = _carry_arrays(rows)
         if old is not None:  # the valid rows go on (the workspace only grows past them)
@@ -668,15 +675,11 @@ class Stepper:
         if batch is None:
             batch = self._empty_batch
         pose = (state.position, state.angle, state.velocity, state.angular_velocity, state.exists)
-        saved = (
-            np.empty_like(state.position), np.empty_like(state.angle),
-            np.empty_like(state.velocity), np.empty_like(state.angular_velocity),
-            np.empty_like(state.exists),
-        )  # fmt: skip
+        self._last_start = None
         taken = 0
         while True:
-            status, done, carried, body, field, need, table = self.kernel(
-                self.bodies, self.settings, pose, self.scratch, self.carry, saved,
+            status, done, carried, body, field, need, table, last_carried = self.kernel(
+                self.bodies, self.settings, pose, self.scratch, self.carry, self.saved_pose,
                 self.saved_carry, batch, self.work.solver_table, taken, self.carried,
                 state.step, k - taken, record,
             )  # fmt: skip
@@ -684,6 +687,8 @@ class Stepper:
             self.carried = carried
             state.step += done
             taken += done
+            if done and status == DONE:
+                self._last_start = (state.step - 1, last_carried)
             if status == NEED_PAIRS:
                 self.work.grow(need)
                 self._fit()
@@ -694,6 +699,42 @@ class Stepper:
                     at = batch[5][taken]
                     self._rows_per_step = max(4, -(-int(at) // taken))
                 return taken, body, field, batch if record else None
+
+    def redo_last(self, state) -> tuple | None:
+        """The batch (one step) of the last step the last `run` took, computed again from its
+        starting state, which the driver left in the saved pose and carry: `Simulation.advance`
+        records nothing, and pays for the last step's contacts only when they are asked for.
+        None when that start is gone (nothing was taken, or the buffers changed since).
+        Checks that the step lands on `state` bit for bit."""
+        if self._last_start is None:
+            return None
+        first, carried = self._last_start
+        pose = tuple(a.copy() for a in self.saved_pose)
+        carry = tuple(a.copy() for a in self.saved_carry)
+        spare_pose = tuple(np.empty_like(a) for a in pose)
+        spare_carry = tuple(np.empty_like(a) for a in carry)
+        batch = self.new_batch(1)
+        while True:
+            status, done, _, _, _, need, table, _ = self.kernel(
+                self.bodies, self.settings, pose, self.scratch, carry, spare_pose, spare_carry,
+                batch, self.work.solver_table, 0, carried, first, 1, True,
+            )  # fmt: skip
+            self.work.solver_table = table
+            if status == NEED_ROWS:
+                batch = _grown_rows(batch, need)
+                continue
+            break
+        now = (state.position, state.angle, state.velocity, state.angular_velocity, state.exists)
+        if status != DONE or not all(np.array_equal(a, b) for a, b in zip(pose, now)):
+            raise RuntimeError("the last step, computed again, did not land on the same state")
+        return batch
+
+    def _empty_saved(self) -> None:
+        n = self.n
+        self.saved_pose = (
+            np.empty((n, 2)), np.empty(n), np.empty((n, 2)), np.empty(n),
+            np.empty(n, dtype=bool),
+        )  # fmt: skip
 
 
 def _carry_arrays(rows: int) -> tuple:

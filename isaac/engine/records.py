@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import hashlib
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -162,17 +163,9 @@ class StepBatch:
         return Contacts(*(a[lo:hi] for a in self._rows))
 
     def record(self, s: int) -> StepRecord:
-        step = self.first + s
-        return StepRecord(
-            step=step,
-            time=step * self.dt,
-            position=self.position[s],
-            angle=self.angle[s],
-            velocity=self.velocity[s],
-            angular_velocity=self.angular_velocity[s],
-            exists=self.exists[s],
-            contacts=self.contacts_of(s),
-        )
+        """Step s as a `StepRecord` whose arrays are views of this batch, made when first read
+        (a record of a 2-body step cost 5 us made eagerly, more than the step)."""
+        return _BatchRecord(self, s)
 
     @staticmethod
     def of_records(records: list[StepRecord], dt: float) -> StepBatch:
@@ -189,3 +182,46 @@ class StepBatch:
             records[0].step, dt, (*state, offsets, *(getattr(rows, f) for f in CONTACT_FIELDS)),
             len(records),
         )  # fmt: skip
+
+
+class _BatchRecord(StepRecord):
+    """A `StepRecord` of one step of a `StepBatch`: the same fields, read from the batch on
+    first use (functools.cached_property writes the instance's __dict__, which a frozen
+    dataclass allows)."""
+
+    def __init__(self, batch: StepBatch, s: int) -> None:
+        d = self.__dict__
+        d["_batch"] = batch
+        d["_s"] = s
+        d["step"] = batch.first + s
+        d["time"] = d["step"] * batch.dt
+
+    def __repr__(self) -> str:
+        return "StepRecord" + super().__repr__()[len("_BatchRecord") :]
+
+    def __reduce__(self):  # pickled (e.g. sent to another process) as a plain StepRecord
+        return StepRecord, tuple(getattr(self, f) for f in StepRecord.__dataclass_fields__)
+
+    @cached_property
+    def position(self) -> np.ndarray:
+        return self._batch.position[self._s]
+
+    @cached_property
+    def angle(self) -> np.ndarray:
+        return self._batch.angle[self._s]
+
+    @cached_property
+    def velocity(self) -> np.ndarray:
+        return self._batch.velocity[self._s]
+
+    @cached_property
+    def angular_velocity(self) -> np.ndarray:
+        return self._batch.angular_velocity[self._s]
+
+    @cached_property
+    def exists(self) -> np.ndarray:
+        return self._batch.exists[self._s]
+
+    @cached_property
+    def contacts(self) -> Contacts:
+        return self._batch.contacts_of(self._s)

@@ -116,7 +116,7 @@ class Simulation:
             velocity=s.velocity.copy(),
             angular_velocity=s.angular_velocity.copy(),
             exists=s.exists.copy(),
-            contacts=self._contacts,
+            contacts=self._contacts_now(),
         )
 
     def step(self) -> StepRecord:
@@ -128,6 +128,8 @@ class Simulation:
         return self._staged_step()
 
     def _staged_step(self) -> StepRecord:
+        if self._last is None:  # after advance(): what a failing step goes back to
+            self._last = self.record()
         contacts, cache = step(
             self.model,
             self.settings,
@@ -164,15 +166,26 @@ class Simulation:
             for _ in range(steps):
                 self._staged_step()
             return
-        if steps > 1:
-            taken, body, field, _ = self._drive(steps - 1, None)
-            if body >= 0:
-                # advance keeps no contacts: the state is the one before the failing step
-                self._contacts = Contacts.empty()
-                self._last = self.record()
-                self._fail(self.state.step + 1, body, field)
-        for _ in self.batches(1):
-            pass
+        taken, body, field, _ = self._drive(steps, None)
+        if body >= 0:
+            # advance keeps no contacts: the state is the one before the failing step
+            self._contacts = Contacts.empty() if taken or self._contacts is None else self._contacts
+            self._last = self.record()
+            self._fail(self.state.step + 1, body, field)
+        # the last step's contacts are computed again from its start if asked for (record())
+        self._contacts = None
+        self._last = None
+
+    def _contacts_now(self) -> Contacts:
+        """The contacts of the step that made the current state."""
+        if self._contacts is None:
+            batch = self._stepper.redo_last(self.state)
+            self._contacts = (
+                StepBatch(self.state.step, self.scene.world.dt, batch, 1).contacts_of(0)
+                if batch is not None
+                else Contacts.empty()
+            )
+        return self._contacts
 
     def batches(self, steps: int | None = None, *, size: int = 64) -> Iterator[StepBatch]:
         """Advance `steps` steps (default: the scene's `world.steps`), `size` at a time, and
