@@ -30,6 +30,7 @@ import rerun as rr
 
 from isaac.engine.records import StepRecord
 from isaac.errors import LogError
+from recorder import blueprint
 
 APP_ID = "isaac"
 STAT_NAMES = (
@@ -44,12 +45,9 @@ STAT_NAMES = (
     "max_impulse",
 )
 
-_MOVING = [70, 140, 230]
-_CONCRETE = [150, 150, 150]
-_POINT = [230, 50, 50]
-_NORMAL = [240, 200, 40]
-_PUSH = [40, 210, 210]
-_IMPULSE = [220, 60, 220]
+# a scene with more moving bodies than this gets their labels on hover only (drawn, they hide
+# the scene)
+LABELS_DRAWN_UP_TO = 12
 
 
 def default_scales(model) -> tuple[float, float]:
@@ -57,6 +55,7 @@ def default_scales(model) -> tuple[float, float]:
 
     L = median body size (circumradius about the centre of mass), m = median moving mass: an
     impulse arrow L long changes a median body's speed by 1 m/s; normals are drawn L / 2 long.
+    Push arrows: `PUSH_SCALE`.
     """
     local = np.asarray(model.vertices_local, dtype=np.float64)
     if local.size == 0:
@@ -68,6 +67,13 @@ def default_scales(model) -> tuple[float, float]:
     moving = mass[~concrete] if np.any(~concrete) else mass
     m_med = float(np.median(moving))
     return char_len / max(m_med * 1.0, 1e-12), 0.5 * char_len
+
+
+# push-out displacements are drawn this many times their length: one of 1 % of a median body
+# size (L above) is drawn as long as a normal (L / 2). True length, they were a few pixels long
+# (the default scene's pushes are 3e-6 to 5e-3 m, its bodies about 0.4 m across) and only
+# appeared as bodies landed; at rest they are zero and none are drawn.
+PUSH_SCALE = 50.0
 
 
 _STRIP_TYPE = rr.components.LineStrip2DBatch._ARROW_DATATYPE
@@ -138,6 +144,39 @@ def _load_kernels() -> None:
     )
 
 
+class _RunSummary:
+    """What the summary text says about the steps sent so far (updated once per batch)."""
+
+    def __init__(self) -> None:
+        self.steps = 0
+        self.first: int | None = None
+        self.last: int | None = None
+        self.energy_first: float | None = None  # total (kinetic + potential), J
+        self.energy_last: float | None = None
+        self.max_depth = (0.0, None)  # (m, step)
+        self.max_impulse = (0.0, None)  # (N s, step)
+        self.contact_rows = 0
+
+    def add(self, steps: list[int], stats: np.ndarray, stats_rows: list[int]) -> None:
+        """A batch: its steps, and its `/stats` rows (STAT_NAMES order) for steps[stats_rows]."""
+        if not steps:
+            return
+        self.steps += len(steps)
+        self.first = steps[0] if self.first is None else self.first
+        self.last = steps[-1]
+        if not stats_rows:
+            return
+        col = {name: stats[:, j] for j, name in enumerate(STAT_NAMES)}
+        if self.energy_first is None:
+            self.energy_first = float(col["total_energy"][0])
+        self.energy_last = float(col["total_energy"][-1])
+        self.contact_rows += int(np.sum(col["contact_count"]))
+        for attr, name in (("max_depth", "max_depth"), ("max_impulse", "max_impulse")):
+            k = int(np.argmax(col[name]))  # the first step of the batch's largest
+            if getattr(self, attr)[1] is None or col[name][k] > getattr(self, attr)[0]:
+                setattr(self, attr, (float(col[name][k]), steps[stats_rows[k]]))
+
+
 class RerunLogWriter:
     """Writes one run to ``path`` (through ``path + '.partial'``).
 
@@ -146,6 +185,7 @@ class RerunLogWriter:
     scene: anything with ``.name`` and ``.world.dt`` (s).
     impulse_scale: m of arrow per N s; default: a median body size per (median mass * 1 m/s).
     normal_length: drawn length (m) of unit normals; default half a median body size.
+    push_scale: push-out arrows are drawn this many times their true length (`PUSH_SCALE`).
     batch: steps buffered per ``send_columns``.
     background: send each finished batch from a thread of its own (the Rerun writer process
         does, so that the steps behind a batch are taken at once); otherwise in the caller.
@@ -159,6 +199,7 @@ class RerunLogWriter:
         *,
         impulse_scale: float | None = None,
         normal_length: float | None = None,
+        push_scale: float = PUSH_SCALE,
         batch: int = 100,
         background: bool = False,
     ) -> None:
@@ -176,6 +217,10 @@ class RerunLogWriter:
         auto_impulse, auto_normal = default_scales(model)
         self.impulse_scale = float(impulse_scale) if impulse_scale is not None else auto_impulse
         self.normal_length = float(normal_length) if normal_length is not None else auto_normal
+        self.push_scale = float(push_scale)
+        self.scene_name = str(scene.name)
+        self.dt = float(scene.world.dt)
+        self._summary = _RunSummary()
         self._closed = False
         self._sent_last: int | None = None  # the last step of the batches sent
         self._static_done = False
@@ -190,39 +235,51 @@ class RerunLogWriter:
         self.rec = rr.RecordingStream(APP_ID, recording_id=f"isaac-{scene.name}")
         self.rec.save(self.partial_path)
         rec = self.rec
+        # the layout (recorder.blueprint), made active: the same on every load
+        rec.send_blueprint(blueprint.blueprint(), make_active=True, make_default=True)
         rec.log("world", rr.Transform3D(scale=[1.0, -1.0, 1.0]), static=True)
+        rec.log("world", blueprint.annotation_context(), static=True)
+        # colours come from the annotation context through the class ids (one per entity)
+        many = int(np.sum(self._not_concrete)) > LABELS_DRAWN_UP_TO
         rec.log(
             "world/bodies/moving",
-            rr.LineStrips2D.from_fields(colors=[_MOVING], radii=[-1.5]),
+            rr.LineStrips2D.from_fields(
+                class_ids=[blueprint.MOVING.class_id],
+                radii=[-1.5],
+                draw_order=10.0,
+                show_labels=False if many else None,
+            ),
             static=True,
         )
         rec.log(
-            "world/contacts", rr.Points2D.from_fields(colors=[_POINT], radii=[-3.0]), static=True
+            "world/contacts",
+            rr.Points2D.from_fields(
+                class_ids=[blueprint.CONTACT.class_id], radii=[-2.5], draw_order=40.0
+            ),
+            static=True,
         )
-        rec.log("world/normals", rr.Arrows2D.from_fields(colors=[_NORMAL]), static=True)
-        rec.log("world/push", rr.Arrows2D.from_fields(colors=[_PUSH]), static=True)
-        rec.log("world/impulses", rr.Arrows2D.from_fields(colors=[_IMPULSE]), static=True)
+        for kind in (blueprint.NORMAL, blueprint.IMPULSE, blueprint.PUSH):
+            rec.log(
+                f"world/{kind.entity}",
+                rr.Arrows2D.from_fields(
+                    class_ids=[kind.class_id],
+                    radii=[-1.5 if kind is blueprint.PUSH else -1.0],
+                    draw_order=30.0 if kind is blueprint.PUSH else 20.0,
+                ),
+                static=True,
+            )
         rec.log(
             "world/impulses",
             rr.AnyValues(
-                impulse_scale_m_per_Ns=self.impulse_scale, normal_length_m=self.normal_length
+                impulse_scale_m_per_Ns=self.impulse_scale,
+                normal_length_m=self.normal_length,
+                push_scale=self.push_scale,
             ),
             static=True,
         )
-        rec.log(
-            "info",
-            rr.TextDocument(
-                f"# ISAAC run: {scene.name}\n\n"
-                f"- physics frame: x right, y up (flipped once on `world`); units m, s, kg\n"
-                f"- impulse arrows (`world/impulses`): {self.impulse_scale:.6g} m per N s\n"
-                f"- normal arrows (`world/normals`): {self.normal_length:.6g} m long (unit normals,"
-                f" from body a to body b)\n"
-                f"- push arrows (`world/push`): true length (m), for body a and body b\n"
-                f"- exact float64 data: the MCAP log\n",
-                media_type=rr.MediaType.MARKDOWN,
-            ),
-            static=True,
-        )
+        for name in STAT_NAMES:
+            rec.log(f"stats/{name}", blueprint.series_style(name), static=True)
+        self._log_info()
         if background:
             # two batches in flight at most (a few MB each); a third waits for the first
             self._queue = queue.Queue(maxsize=2)
@@ -230,6 +287,56 @@ class RerunLogWriter:
                 target=self._work, name="isaac-rerun-sender", daemon=True
             )
             self._thread.start()
+
+    def _log_info(self, state: str = "recording (not closed yet)") -> None:
+        """The ``info`` text beside the view: the run's summary so far, the legend, the
+        scales; logged static at the start and again when the recording is closed (the viewer
+        keeps the last)."""
+        g = "{:.6g}".format
+        s = self._summary
+        n, concrete = len(self.names), int(np.sum(self.concrete))
+        lines = [f"# ISAAC run: {self.scene_name}", "", f"**{state}**", ""]
+        lines += [blueprint.legend_markdown(), "", "## Run", ""]
+        lines.append(f"- {n} bodies ({concrete} concrete), dt = {g(self.dt)} s")
+        if s.first is not None:
+            lines.append(
+                f"- {s.steps} steps recorded: {s.first} to {s.last} "
+                f"(t = {g(s.first * self.dt)} to {g(s.last * self.dt)} s)"
+            )
+        if s.energy_first is not None:
+            lines.append(
+                f"- energy (kinetic + potential): {g(s.energy_first)} J at the start, "
+                f"{g(s.energy_last)} J at the end"
+            )
+            for what, (value, at), unit in (
+                ("depth", s.max_depth, "m"),
+                ("impulse", s.max_impulse, "N s"),
+            ):
+                where = "" if at is None else f" (step {at})"
+                lines.append(f"- largest {what} {g(value)} {unit}{where}")
+            lines.append(f"- contact rows, all steps: {s.contact_rows}")
+        lines += [
+            "",
+            "## Scales",
+            "",
+            "- physics frame: x right, y up (flipped once on `world`); m, s, kg",
+            f"- impulse arrows: j n, {g(self.impulse_scale)} m per N s",
+            f"- normals: unit, from body a to body b, drawn {g(self.normal_length)} m long",
+            f"- push-out arrows (body a and body b): {g(self.push_scale)} x their length",
+            "- a body's label is `INDEX:NAME`, INDEX the log's body index "
+            "(as in `isaac inspect LOG --step K`)",
+            "- positions here are float32; exact float64 values: the MCAP log",
+        ]
+        self.rec.log(
+            "info",
+            rr.TextDocument("\n".join(lines) + "\n", media_type=rr.MediaType.MARKDOWN),
+            static=True,
+        )
+
+    def _label(self, k: int) -> str:
+        """A body's label: its log index and name (the strips' instance index is not the body
+        index: only existing moving bodies are drawn)."""
+        return f"{k}:{self.names[k]}"
 
     def _reset(self) -> None:
         """Start an empty batch."""
@@ -372,9 +479,10 @@ class RerunLogWriter:
                     "world/bodies/concrete",
                     rr.LineStrips2D(
                         self._outlines(angle, position, concrete),
-                        colors=[_CONCRETE],
-                        radii=[-1.5],
-                        labels=[self.names[k] for k in np.flatnonzero(concrete)],
+                        radii=[-3.0],
+                        labels=[self._label(k) for k in np.flatnonzero(concrete)],
+                        class_ids=[blueprint.CONCRETE.class_id],
+                        draw_order=5.0,
                     ),
                     static=True,
                 )
@@ -387,7 +495,9 @@ class RerunLogWriter:
             rec.set_time("sim_time", duration=float(time))
             rec.log(
                 "world/bodies/moving",
-                rr.LineStrips2D.from_fields(labels=[self.names[k] for k in np.flatnonzero(moving)]),
+                rr.LineStrips2D.from_fields(
+                    labels=[self._label(k) for k in np.flatnonzero(moving)]
+                ),
             )
             self._last_labels_key = key
         if key != self._moving_key:
@@ -447,6 +557,9 @@ class RerunLogWriter:
         self._check()
         count = self._count
         lengths, strip_counts = self._strip_lengths()
+        self._push_v[: self._push_at] *= np.float32(self.push_scale)  # drawn scaled
+        stats = self._stats[self._stats_rows]
+        self._summary.add(self._steps, stats, self._stats_rows)
         # what _send_batch uses: the batch's own arrays (new ones are made for the next)
         job = (
             self._steps,
@@ -461,7 +574,7 @@ class RerunLogWriter:
             self._push_pt[: self._push_at],
             self._push_v[: self._push_at],
             self._push_counts[:count].copy(),
-            self._stats[self._stats_rows],
+            stats,
             self._stats_rows,
         )
         self._sent_last = self._steps[-1]  # once per batch: where a late warning is logged
@@ -629,17 +742,15 @@ class RerunLogWriter:
         if self._error is not None:
             self.rec.disconnect()  # the .partial file stays, as after a crash
             self._check()
-        if not complete:
+        if complete:
+            self._log_info("run complete")
+        else:
             at = stopped_at if stopped_at is not None else last
+            stopped = f"run stopped at step {at}" + (f": {reason}" if reason else "")
+            self._log_info(stopped)
             if at is not None:
                 self.rec.set_time("step", sequence=int(at))
-            self.rec.log(
-                "log",
-                rr.TextLog(
-                    f"run stopped at step {at}" + (f": {reason}" if reason else ""),
-                    level=rr.TextLogLevel.WARN,
-                ),
-            )
+            self.rec.log("log", rr.TextLog(stopped, level=rr.TextLogLevel.WARN))
         self.rec.flush()
         self.rec.disconnect()
         os.replace(self.partial_path, self.path)
@@ -657,6 +768,7 @@ class RerunLogWriter:
                 finally:
                     self._stop_worker()
                 if reason is not None and self._error is None:
+                    self._log_info(f"not closed: {reason}")
                     if self._sent_last is not None:
                         self.rec.set_time("step", sequence=int(self._sent_last))
                     self.rec.log("log", rr.TextLog(reason, level=rr.TextLogLevel.WARN))
