@@ -7,6 +7,13 @@ import math
 import numba
 import numpy as np
 
+from isaac import trig
+
+# determinism: the step's own sin/cos (isaac/trig.py: IEEE basic operations only), compiled; the
+# same bits as the pure-Python function the scene layer calls, on any machine (libm's last bit
+# differs between implementations).
+sin_cos = numba.njit(cache=True, nogil=True)(trig.sin_cos)
+
 
 @numba.njit(cache=True, nogil=True)
 def transform(
