@@ -45,7 +45,9 @@ def _bits(value):
     if isinstance(value, dict):
         return tuple((k, _bits(v)) for k, v in value.items())
     if dataclasses.is_dataclass(value):
-        return tuple((f.name, _bits(getattr(value, f.name))) for f in dataclasses.fields(value))
+        # fields left out of comparison (Scene.marks: where the YAML said it) are not the scene
+        fields = [f for f in dataclasses.fields(value) if f.compare]
+        return tuple((f.name, _bits(getattr(value, f.name))) for f in fields)
     return value
 
 

@@ -38,11 +38,12 @@ def register(subparsers) -> None:
     check.set_defaults(func=cmd_check)
 
 
-def _warn(command: str, scene) -> None:
-    """The scene's warnings (isaac.scene.warnings), one line each on stderr; not errors."""
+def _warn(command: str, scene, steps: int | None = None) -> None:
+    """The scene's warnings (isaac.scene.warnings) for a run of `steps` steps (default the
+    scene's), one line each on stderr; not errors."""
     from isaac.scene.warnings import scene_warnings
 
-    for line in scene_warnings(scene):
+    for line in scene_warnings(scene, steps):
         print(f"isaac {command}: warning: {line}", file=sys.stderr)
 
 
@@ -130,10 +131,10 @@ def cmd_run(args: argparse.Namespace) -> int:
 
     started = time.perf_counter()
     scene = load_scene(args.scene)
-    _warn("run", scene)
     steps = scene.world.steps if args.steps is None else args.steps
     if steps < 0:
         raise IsaacError(f"--steps must be >= 0, got {steps}")
+    _warn("run", scene, steps)
     claims = _claim_outputs(args)
     try:
         sim = Simulation(scene)

@@ -48,7 +48,7 @@ from isaac.scene.reader import (
     shown,
 )
 from isaac.scene.settings import DEFAULT_PRESET, PRESETS, WorldSettings
-from isaac.scene.spec import BodySpec, Scene
+from isaac.scene.spec import BodySpec, Scene, SceneMarks
 
 # --- world ----------------------------------------------------------------------------------
 
@@ -501,6 +501,7 @@ def _read_scene(r: Reader, root, default_name: str) -> Scene:
     origin: dict[str, tuple[str, int]] = {}  # name -> (key path, line) where it was made
     explicit = []  # (item node, key path) of each body of `bodies:`
     made = []  # (first body, end, kind, options node, key path, name prefix) of each generator
+    friction_given = []  # (line, key path) of each `friction:` given, for the warnings
 
     def add(spec: BodySpec, path: str, node) -> None:
         if spec.name in origin:
@@ -526,6 +527,10 @@ def _read_scene(r: Reader, root, default_name: str) -> Scene:
                         name_node = value_node
             add(spec, join_path(path, "name") if name_node is not item else path, name_node)
             explicit.append((item, path))
+            if isinstance(item, MappingNode):
+                for key_node, value_node in item.value:
+                    if key_node.value == "friction":
+                        friction_given.append((line_of(value_node), join_path(path, "friction")))
     if "generators" in m and scalar_or_none(m["generators"][1]) is not None:
         items = r.sequence(m["generators"][1], "generators")
         for i, item in enumerate(items):
@@ -537,12 +542,29 @@ def _read_scene(r: Reader, root, default_name: str) -> Scene:
             for spec in specs:
                 add(spec, path, item)
             made.append((first, len(bodies), kind, options_node, gen_path, prefix))
+            friction_node = _option_node(r, options_node, gen_path, "friction")
+            if friction_node is not None:
+                friction_given.append((line_of(friction_node), join_path(gen_path, "friction")))
     if not bodies:
         raise r.fail("the scene has no bodies (give `bodies:` or `generators:`)", root)
     problem = checks.first_problem(bodies)
     if problem is not None:
         raise _refusal(r, problem, bodies, explicit, made)
-    return Scene(name=name, world=world, bodies=tuple(bodies), source=r.source, analytic=analytic)
+    marks = SceneMarks(
+        bodies=tuple((line_of(item), path) for item, path in explicit),
+        generators=tuple(
+            (first, end, line_of(node), path) for first, end, _, node, path, _ in made
+        ),
+        friction=tuple(friction_given),
+    )
+    return Scene(
+        name=name,
+        world=world,
+        bodies=tuple(bodies),
+        source=r.source,
+        analytic=analytic,
+        marks=marks,
+    )
 
 
 def _body_alone(r: Reader, text: str, line: int, index: int) -> SceneError | None:

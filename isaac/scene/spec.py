@@ -2,7 +2,8 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from typing import NamedTuple
 
 from isaac.scene.settings import WorldSettings
 
@@ -42,6 +43,19 @@ class BodySpec:
     leaves_at: float | None = None
 
 
+class SceneMarks(NamedTuple):
+    """Where a scene's YAML text said what it says (1-based lines), for warnings.
+
+    bodies: (line, key path) of each body of `bodies:`, the scene's first bodies in order.
+    generators: (first body, end, line, key path) of each generator's bodies[first:end].
+    friction: (line, key path) of every `friction:` a body or a generator gives.
+    """
+
+    bodies: tuple[tuple[int, str], ...]
+    generators: tuple[tuple[int, int, int, str], ...]
+    friction: tuple[tuple[int, str], ...]
+
+
 @dataclass(frozen=True)
 class Scene:
     """A validated scene: world settings and bodies, every generator expanded.
@@ -49,6 +63,8 @@ class Scene:
     name: the scene's name (from the file, or its stem).
     source: where it came from (path or "<text>"), for messages.
     analytic: optional analytic reference the scene declares (used by `isaac tradeoff`), or None.
+    marks: where the YAML gave each body (SceneMarks), or None (a scene built in Python or read
+        from a log's text); never compared, so it does not change what a scene is.
     """
 
     name: str
@@ -56,3 +72,4 @@ class Scene:
     bodies: tuple[BodySpec, ...]
     source: str = "<scene>"
     analytic: dict | None = None
+    marks: SceneMarks | None = field(default=None, compare=False, repr=False)

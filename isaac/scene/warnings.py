@@ -1,7 +1,22 @@
 """Warnings about a valid scene that will not behave as its author expects: data, not errors.
 
-`scene_warnings(scene)` returns one-line messages; the command line prints them (a scene that
-warns still loads, runs and replays).
+`scene_warnings(scene, steps)` returns one-line messages (`FILE:LINE: KEY.PATH: what`, the line
+and key of the body or generator at fault when the scene was read from YAML); the command line
+prints them (a scene that warns still loads, runs and replays). One line per kind of trap, naming
+the worst case and counting the others, so a scene of 100,000 bodies gives a few lines:
+
+- mass ratio (below);
+- friction given (a body's or a generator's `friction:`) while `world.friction` is off: the
+  coefficients are ignored;
+- a body that never exists in the run: it enters after the run's last step, or enters and
+  leaves between two steps (a body exists at step k while enters_at <= k * dt < leaves_at, the
+  engine's rule, isaac.engine.world.Model);
+- a body whose centre of mass lies inside a concrete body they both exist at some step: the
+  push-out can only move it the shortest way out, which may be through the concrete;
+- bodies that overlap at step 0 by more than the slop (`world.slop`, at most SLOP_SHARE of the
+  thinner body's thickness, as isaac.engine.push_out caps it): the first steps push them apart
+  instead of starting from the scene as written.
+The geometry is isaac.scene.overlaps (numpy; `isaac check` loads no compiled code).
 
 Mass ratio. A light body under a much heavier one is squeezed into what it rests on once the
 ratio passes what the solver can hold (pymunk and Box2D 2.3 lose a 1000:1 stack within 0.5 s).
@@ -19,20 +34,57 @@ stability suite asserts). At 1e9:1 the light box ends inside the concrete ground
 
 from __future__ import annotations
 
+import numpy as np
+
+from isaac.scene import overlaps
 from isaac.scene.checks import mass_properties
 from isaac.scene.reader import shown
-from isaac.scene.spec import Scene
+from isaac.scene.spec import BodySpec, Scene
 
 HELD_MASS_RATIO = {"seed": 1.5, "fast": 50.0, "balanced": 100.0, "accurate": 1000.0}
+# isaac.engine.push_out.SLOP_SHARE (the scene layer may not import the engine; a test checks
+# the two agree)
+SLOP_SHARE = 0.05
+# pairs whose bounding boxes meet, at most; then pairs given to SAT, at most (those whose boxes
+# overlap by more than the slop on both axes: the MTD is never more than either overlap). Past
+# either, the count says "at least": only bodies heaped on one another get near them.
+MAX_PAIRS = 2_000_000
+MAX_SAT_PAIRS = 200_000
 
 
-def scene_warnings(scene: Scene) -> list[str]:
-    """One line per thing in `scene` that the engine is not measured to handle well.
+def scene_warnings(scene: Scene, steps: int | None = None) -> list[str]:
+    """One line per kind of trap in `scene` run for `steps` steps (default `world.steps`), in
+    the order of the module docstring; [] for a scene that falls into none."""
+    steps = scene.world.steps if steps is None else steps
+    lines = _mass_ratio(scene)
+    lines += _friction_ignored(scene)
+    first, last = existence(scene.bodies, scene.world.dt, steps)
+    lines += _never_exist(scene, steps, first, last)
+    lines += _placement(scene, first, last)
+    return lines
 
-    Today: the ratio of the heaviest to the lightest movable (not concrete) body, when it
-    exceeds HELD_MASS_RATIO for the scene's `world.fidelity` preset (keys given explicitly in
-    `world:` are not taken into account).
-    """
+
+def _where(scene: Scene, i: int) -> str:
+    """`FILE:LINE: KEY.PATH: ` of the scene key that made body i (`FILE: ` if unknown)."""
+    marks = scene.marks
+    if marks is not None:
+        if i < len(marks.bodies):
+            line, path = marks.bodies[i]
+            return f"{scene.source}:{line}: {path}: "
+        for first, end, line, path in marks.generators:
+            if first <= i < end:
+                return f"{scene.source}:{line}: {path}: "
+    return f"{scene.source}: "
+
+
+def _more(count: int, what: str) -> str:
+    return f"; and {count} more {what}" if count else ""
+
+
+def _mass_ratio(scene: Scene) -> list[str]:
+    """The ratio of the heaviest to the lightest movable (not concrete) body, when it exceeds
+    HELD_MASS_RATIO for the scene's `world.fidelity` preset (keys given explicitly in `world:`
+    are not taken into account)."""
     movable = [i for i, b in enumerate(scene.bodies) if not b.concrete]
     if len(movable) < 2:
         return []
@@ -50,3 +102,138 @@ def scene_warnings(scene: Scene) -> list[str]:
         "light body under a heavy one may be pushed into what it rests on "
         "(docs/scene-format.md, Warnings)"
     ]
+
+
+def _friction_ignored(scene: Scene) -> list[str]:
+    """`friction:` given while world.friction is off. Without marks (a scene not read from
+    YAML), the bodies whose friction differs from BodySpec's default."""
+    if scene.world.friction:
+        return []
+    marks = scene.marks
+    if marks is not None:
+        if not marks.friction:
+            return []
+        (line, path), others = marks.friction[0], len(marks.friction) - 1
+        where = f"{scene.source}:{line}: {path}: "
+    else:
+        default = BodySpec.__dataclass_fields__["friction"].default
+        given = [i for i, b in enumerate(scene.bodies) if b.friction != default]
+        if not given:
+            return []
+        where, others = _where(scene, given[0]), len(given) - 1
+    return [
+        f"{where}friction is given but world.friction is off, so no friction acts (set "
+        f"world.friction: true to use it){_more(others, 'friction keys likewise')}"
+    ]
+
+
+def existence(bodies, dt: float, steps: int) -> tuple[np.ndarray, np.ndarray]:
+    """(first, last): (n,) int64, the first and last of steps 0..steps at which each body
+    exists (enters_at <= k * dt < leaves_at, with k * dt the float64 product the engine
+    computes); first > last for a body that never exists in the run."""
+    n = len(bodies)
+    enters = np.fromiter((b.enters_at for b in bodies), dtype=np.float64, count=n)
+    leaves = np.fromiter(
+        (np.inf if b.leaves_at is None else b.leaves_at for b in bodies), np.float64, count=n
+    )
+    cap = float(steps + 1)  # beyond the run; keeps huge times within int64
+    # the smallest k with k * dt >= enters: the quotient, corrected for its rounding
+    k = np.minimum(np.ceil(enters / dt), cap)
+    k = np.where(k * dt < enters, k + 1, k)
+    k = np.where((k >= 1) & ((k - 1) * dt >= enters), k - 1, k)
+    first = np.minimum(k, cap).astype(np.int64)
+    # the largest k with k * dt < leaves
+    finite = np.isfinite(leaves)
+    j = np.minimum(np.ceil(np.where(finite, leaves, 0.0) / dt) - 1, cap)
+    j = np.where((j + 1) * dt < leaves, j + 1, j)
+    j = np.where(j * dt >= leaves, j - 1, j)
+    last = np.where(finite, np.minimum(j, steps), steps).astype(np.int64)
+    return first, last
+
+
+def _never_exist(scene: Scene, steps: int, first: np.ndarray, last: np.ndarray) -> list[str]:
+    dt = scene.world.dt
+    end = f"the run's last step ({steps}, t = {steps * dt:.6g} s)"
+    lines = []
+    late = np.flatnonzero(first > steps)
+    if len(late):
+        i = int(late[0])
+        b = scene.bodies[i]
+        lines.append(
+            f"{_where(scene, i)}the body {shown(b.name)} enters at {b.enters_at!r} s, after "
+            f"{end}: it never exists in the run (raise world.steps or --steps, or enter "
+            f"earlier){_more(len(late) - 1, 'bodies likewise')}"
+        )
+    between = np.flatnonzero((first <= steps) & (first > last))
+    if len(between):
+        i = int(between[0])
+        b = scene.bodies[i]
+        k = int(first[i])
+        lines.append(
+            f"{_where(scene, i)}the body {shown(b.name)} enters at {b.enters_at!r} s and "
+            f"leaves at {b.leaves_at!r} s, between steps {k - 1} and {k} (dt {dt!r} s): it "
+            f"never exists at a step{_more(len(between) - 1, 'bodies likewise')}"
+        )
+    return lines
+
+
+def _placement(scene: Scene, first: np.ndarray, last: np.ndarray) -> list[str]:
+    """Bodies inside concrete bodies, and overlaps at step 0 beyond the slop."""
+    bodies = scene.bodies
+    if len(bodies) < 2:
+        return []
+    placed = overlaps.place(bodies)
+    a, b, complete = overlaps.box_pairs(placed.lo, placed.hi, MAX_PAIRS)
+    concrete = np.fromiter((x.concrete for x in bodies), dtype=bool, count=len(bodies))
+    keep = ~(concrete[a] & concrete[b])  # two concrete bodies never collide
+    a, b = a[keep], b[keep]
+    lines = []
+    # inside: the movable body's centre inside the concrete one, at some step they share
+    one = concrete[a] ^ concrete[b]
+    c = np.where(concrete[a], a, b)[one]
+    m = np.where(concrete[a], b, a)[one]
+    share = np.maximum(first[c], first[m]) <= np.minimum(last[c], last[m])
+    c, m = c[share], m[share]
+    deep = overlaps.centre_depths(placed, c, m)
+    inside = deep > 0.0
+    n = len(bodies)
+    inside_keys = np.zeros(0, dtype=np.int64)
+    if inside.any():
+        c, m, deep = c[inside], m[inside], deep[inside]
+        worst = int(np.argmax(deep))
+        i, j = int(m[worst]), int(c[worst])
+        inside_keys = np.minimum(c, m) * n + np.maximum(c, m)  # a pair as one integer
+        lines.append(
+            f"{_where(scene, i)}the body {shown(bodies[i].name)} is placed inside the "
+            f"concrete body {shown(bodies[j].name)} (its centre {float(deep[worst]):.3g} m "
+            "deep): the push-out moves it out the shortest way, which may be through the "
+            f"concrete{_more(len(deep) - 1, 'bodies inside concrete bodies')}"
+        )
+    # overlap at step 0
+    now = (first[a] == 0) & (last[a] >= 0) & (first[b] == 0) & (last[b] >= 0)
+    a, b = a[now], b[now]
+    fresh = ~np.isin(a * n + b, inside_keys)  # reported as inside already
+    a, b = a[fresh], b[fresh]
+    slop = np.minimum(
+        scene.world.slop, SLOP_SHARE * np.minimum(placed.thickness[a], placed.thickness[b])
+    )
+    box_overlap = np.minimum(placed.hi[a], placed.hi[b]) - np.maximum(placed.lo[a], placed.lo[b])
+    maybe = box_overlap.min(axis=1) > slop
+    a, b, slop = a[maybe][:MAX_SAT_PAIRS], b[maybe][:MAX_SAT_PAIRS], slop[maybe][:MAX_SAT_PAIRS]
+    complete = complete and int(maybe.sum()) <= MAX_SAT_PAIRS
+    depth = overlaps.depths(placed, a, b)
+    over = depth > slop
+    if over.any():
+        a, b, depth = a[over], b[over], depth[over]
+        worst = int(np.argmax(depth))
+        i, j = int(a[worst]), int(b[worst])
+        count = f"{len(depth)}" if complete else f"at least {len(depth)}"
+        pairs = "pair of bodies overlaps" if len(depth) == 1 else "pairs of bodies overlap"
+        lines.append(
+            f"{_where(scene, i)}{count} {pairs} at step 0 by more than the slop (world.slop "
+            f"{scene.world.slop!r} m, at most {SLOP_SHARE:.0%} of the thinner body's thickness): "
+            f"{shown(bodies[i].name)} and {shown(bodies[j].name)} by "
+            f"{float(depth[worst]):.3g} m, the most; the first steps push them apart instead "
+            "of starting from the scene as written"
+        )
+    return lines
