@@ -4,7 +4,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: run test test-all lint bench clean
+.PHONY: run test test-all test-viewer lint bench clean
 
 $(BIN)/python:
 	@test -n "$(PYTHON)" && $(PYTHON) -c "import sys; sys.exit(sys.version_info < (3, 11))" || { echo "error: needs Python >= 3.11 (set PYTHON=...)"; exit 2; }
@@ -21,6 +21,10 @@ run: $(STAMP)
 
 test: $(STAMP)
 	$(BIN)/python -m pytest -q
+
+# the Rerun web viewer in headless Chromium (installs Debian's chromium with apt-get if missing)
+test-viewer: $(STAMP)
+	$(BIN)/python -m pytest -q -m slow tests/test_viewer_browser.py
 
 lint: $(STAMP)
 	$(BIN)/ruff check .

@@ -15,9 +15,11 @@ import difflib
 import json
 import os
 import shutil
+import signal
 import subprocess
 import sys
 import tempfile
+import time
 from pathlib import Path
 
 from isaac.errors import LogError
@@ -40,9 +42,29 @@ def register(subparsers) -> None:
     p.set_defaults(func=cmd_inspect)
 
     v = subparsers.add_parser("view", help="open a recording in the Rerun viewer")
-    v.add_argument("log", help="LOG.rrd, or LOG.mcap (converted on the fly)")
-    v.add_argument("--web", action="store_true", help="serve the web viewer on localhost instead")
-    v.add_argument("--port", type=int, default=None, help="web viewer port (with --web)")
+    v.add_argument(
+        "log",
+        help="LOG.rrd, or LOG.mcap (converted once; the copy LOG.mcap.rrd is reused while "
+        "the log is unchanged)",
+    )
+    v.add_argument(
+        "--web",
+        action="store_true",
+        help="serve the web viewer and print its URL (the default without a display)",
+    )
+    v.add_argument(
+        "--bind",
+        default="127.0.0.1",
+        metavar="ADDR",
+        help="address the viewer's servers listen on (default 127.0.0.1: this machine only)",
+    )
+    v.add_argument("--port", type=int, help="web viewer HTTP port (default: a free one)")
+    v.add_argument(
+        "--grpc-port", type=int, help="the viewer's gRPC server port (default: a free one)"
+    )
+    v.add_argument(
+        "--fresh", action="store_true", help="convert a .mcap again, even if its copy is current"
+    )
     v.add_argument("--dry-run", action="store_true", help=argparse.SUPPRESS)
     v.set_defaults(func=cmd_view)
 
@@ -294,42 +316,187 @@ def cmd_recover(args: argparse.Namespace) -> int:
     return 0
 
 
-def _rerun_executable() -> str:
-    here = Path(sys.executable).parent / "rerun"
-    if here.exists():
-        return str(here)
+def rerun_executable() -> str:
+    """The Rerun viewer binary itself. Not the ``rerun`` script beside this Python: that is a
+    Python process that runs the binary as its child, and stopping it left the viewer serving
+    (seen: orphaned ``rerun --serve-web`` processes after SIGTERM)."""
+    try:
+        import rerun_cli
+
+        here = Path(os.environ.get("RERUN_CLI_PATH") or Path(rerun_cli.__file__).parent / "rerun")
+        if sys.platform == "darwin" and "RERUN_CLI_PATH" not in os.environ:
+            bundled = here.parent / "Rerun.app" / "Contents" / "MacOS" / "Rerun"
+            here = bundled if bundled.exists() else here
+        if sys.platform.startswith("win"):
+            here = here.with_suffix(".exe")
+        if here.exists():
+            return str(here)
+    except ImportError:
+        pass
     found = shutil.which("rerun")
     if found is None:
         raise LogError("the Rerun viewer (`rerun`, from rerun-sdk) is not installed")
     return found
 
 
+def _has_display() -> bool:
+    """Whether a native window can open: on Linux an X11 or Wayland display must be named
+    (without one, the native viewer dies with a raw winit error); elsewhere, a desktop."""
+    if not sys.platform.startswith("linux"):
+        return True
+    return any(os.environ.get(k) for k in ("DISPLAY", "WAYLAND_DISPLAY", "WAYLAND_SOCKET"))
+
+
+def _free_port(bind: str) -> int:
+    """A TCP port free on ``bind`` now (the kernel's choice)."""
+    import socket
+
+    family = socket.AF_INET6 if ":" in bind else socket.AF_INET
+    with socket.socket(family, socket.SOCK_STREAM) as s:
+        s.bind((bind, 0))
+        return s.getsockname()[1]
+
+
+def _listening(host: str, port: int) -> bool:
+    import socket
+
+    try:
+        with socket.create_connection((host, port), timeout=0.5):
+            return True
+    except OSError:
+        return False
+
+
+class _Stopped(Exception):
+    """SIGTERM or SIGHUP arrived: the viewer is stopped and the temporary files go."""
+
+    def __init__(self, signum: int) -> None:
+        super().__init__(signum)
+        self.signum = signum
+
+
+def _stop(signum, frame) -> None:
+    raise _Stopped(signum)
+
+
+def view_copy_path(log: str) -> str:
+    """Where ``isaac view LOG.mcap`` keeps its Rerun copy of the log: next to it."""
+    return log + ".rrd"
+
+
+def _viewable(path: str, *, fresh: bool, tmpdir: str) -> str:
+    """The .rrd to show for ``path``: itself, or a .mcap's Rerun copy.
+
+    A closed log's copy (``LOG.mcap.rrd``) is kept and reused while its modification time is
+    the log's own (it is set so when written; the 600-step, 66-body default log took 4-6 s
+    to convert on a loaded 2-core machine, a reused copy no time). A ``.partial`` log (still
+    growing, or left by a killed run), or a log in a directory this user cannot write, is
+    converted into ``tmpdir``, removed when the viewer stops.
+    """
+    if not (path.endswith(".mcap") or path.endswith(".mcap.partial")):
+        return path
+    source = os.stat(path)
+    copy = view_copy_path(path)
+    keep = path.endswith(".mcap") and os.access(os.path.dirname(os.path.abspath(path)), os.W_OK)
+    if not keep:
+        copy = os.path.join(tmpdir, Path(path).name.split(".mcap")[0] + ".rrd")
+    elif not fresh and os.path.exists(copy) and os.stat(copy).st_mtime_ns == source.st_mtime_ns:
+        return copy
+    from recorder.rerun_writer import mcap_to_rrd  # rerun and numba: only when converting
+
+    try:
+        mcap_to_rrd(path, copy)
+    except BaseException:
+        # a signal or an error mid-way: no half-written copy stays behind
+        for leftover in (copy + ".partial", copy):
+            if keep and os.path.exists(leftover):
+                os.remove(leftover)
+        raise
+    if keep:
+        os.utime(copy, ns=(source.st_atime_ns, source.st_mtime_ns))
+    return copy
+
+
 def cmd_view(args: argparse.Namespace) -> int:
+    """Open the viewer; return when it is closed or on Ctrl-C, SIGTERM or SIGHUP, having
+    stopped the viewer process started here and removed the temporary files."""
     from recorder.mcap_records import check_regular
 
     path = args.log
     if not os.path.exists(path):
         raise LogError(f"{path}: no such file")
     check_regular(path)  # a FIFO or a device would never end
-    tmpdir = None
-    if path.endswith(".mcap") or path.endswith(".mcap.partial"):
-        from recorder.rerun_writer import mcap_to_rrd
-
-        tmpdir = tempfile.mkdtemp(prefix="isaac-view-")
-        rrd = os.path.join(tmpdir, Path(path).name.split(".mcap")[0] + ".rrd")
-        mcap_to_rrd(path, rrd)
-        path = rrd
-    command = [_rerun_executable()]
-    if args.web:
-        command += ["--serve-web", "--bind", "127.0.0.1"]
-        if args.port:
-            command += ["--web-viewer-port", str(args.port)]
-    command.append(path)
-    if args.dry_run:
-        print(" ".join(command))
-        return 0
+    signals = (signal.SIGTERM, signal.SIGHUP)
+    previous = {sig: signal.signal(sig, _stop) for sig in signals}
+    tmpdir = tempfile.mkdtemp(prefix="isaac-view-")
+    proc = None
     try:
-        return subprocess.call(command)
+        rrd = _viewable(path, fresh=args.fresh, tmpdir=tmpdir)
+        web = args.web or not _has_display()
+        if web and not args.web and not args.dry_run:
+            print(
+                "isaac view: no display (DISPLAY and WAYLAND_DISPLAY unset): serving the web "
+                "viewer instead (as with --web)",
+                file=sys.stderr,
+            )
+        bind = args.bind
+        grpc_port = args.grpc_port or _free_port(bind)
+        command = [rerun_executable(), "--bind", bind, "--port", str(grpc_port)]
+        if web:
+            http_port = args.port or _free_port(bind)
+            command += ["--serve-web", "--web-viewer-port", str(http_port)]
+        command.append(rrd)
+        if args.dry_run:
+            print(" ".join(command))
+            return 0
+        # the viewer's own chatter (a first-run banner, INFO lines) goes to a file: shown only
+        # if it fails
+        out_path = os.path.join(tmpdir, "rerun.out")
+        with open(out_path, "wb") as out:
+            # a session of its own: a Ctrl-C reaches this process, which stops the viewer
+            proc = subprocess.Popen(
+                command, stdout=out, stderr=subprocess.STDOUT, start_new_session=True
+            )
+        if web:
+            host = "127.0.0.1" if bind in ("0.0.0.0", "::", "") else bind
+            while proc.poll() is None and not (
+                _listening(host, http_port) and _listening(host, grpc_port)
+            ):
+                time.sleep(0.1)
+            if proc.poll() is None:
+                proxy = f"rerun%2Bhttp%3A%2F%2F{host}%3A{grpc_port}%2Fproxy"
+                print(f"http://{host}:{http_port}/?url={proxy}", flush=True)
+                print("isaac view: open the URL above; Ctrl-C stops the viewer", file=sys.stderr)
+        status = proc.wait()
+        if status != 0:
+            with open(out_path, errors="replace") as f:
+                lines = [x.strip() for x in f if x.strip()]
+            said = lines[-1] if lines else "no output"
+            hint = "" if web else " (without a display, use --web)"
+            print(
+                f"isaac view: the viewer exited with status {status}: {said}{hint}", file=sys.stderr
+            )
+        return status
+    except KeyboardInterrupt:
+        return 130
+    except _Stopped as stopped:
+        return 128 + stopped.signum
     finally:
-        if tmpdir is not None:
+        # the cleanup runs to its end: a second signal now would leave the viewer or the files
+        interrupt = signal.signal(signal.SIGINT, signal.SIG_IGN)
+        for sig in signals:
+            signal.signal(sig, signal.SIG_IGN)
+        try:
+            if proc is not None and proc.poll() is None:
+                # its session's process group (proc.pid): the viewer and anything it started
+                os.killpg(proc.pid, signal.SIGTERM)
+                try:
+                    proc.wait(timeout=10)
+                except subprocess.TimeoutExpired:
+                    os.killpg(proc.pid, signal.SIGKILL)
+                    proc.wait()
+        finally:
             shutil.rmtree(tmpdir, ignore_errors=True)
+            for sig, handler in previous.items():
+                signal.signal(sig, handler)
+            signal.signal(signal.SIGINT, interrupt)

@@ -1,0 +1,137 @@
+"""``isaac view``: without a display it serves the web viewer on 127.0.0.1 and prints one URL;
+SIGTERM stops the viewer it started and leaves no temporary file; a .mcap's Rerun copy is kept
+next to the log and reused while the log is unchanged."""
+
+from __future__ import annotations
+
+import os
+import re
+import select
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).parent / "recorder"))
+from test_recorder_mcap import PYTHON, REPO, record_run, run_cli  # noqa: E402
+
+
+def listening_sockets(port: int) -> list[str]:
+    """Local addresses (hex, as in /proc/net/tcp*) of the listening TCP sockets on ``port``."""
+    found = []
+    for table in ("/proc/net/tcp", "/proc/net/tcp6"):
+        if not os.path.exists(table):
+            continue
+        with open(table) as f:
+            next(f)
+            for line in f:
+                fields = line.split()
+                address, hex_port = fields[1].split(":")
+                if fields[3] == "0A" and int(hex_port, 16) == port:  # 0A: LISTEN
+                    found.append(address)
+    return found
+
+
+def children(pid: int) -> list[int]:
+    with open(f"/proc/{pid}/task/{pid}/children") as f:
+        return [int(x) for x in f.read().split()]
+
+
+def alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    return True
+
+
+def test_view_without_a_display_serves_localhost_and_sigterm_leaves_nothing_behind(tmp_path):
+    logs, tmp = tmp_path / "logs", tmp_path / "tmp"
+    logs.mkdir()
+    tmp.mkdir()
+    log = logs / "run.mcap"
+    record_run(log, n=6, contacts=2, steps=20)
+    env = {k: v for k, v in os.environ.items() if k not in ("DISPLAY", "WAYLAND_DISPLAY")}
+    env["TMPDIR"] = str(tmp)
+    proc = subprocess.Popen(
+        [PYTHON, "-m", "isaac", "view", str(log)],
+        cwd=REPO,
+        env=env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        ready, _, _ = select.select([proc.stdout], [], [], 180)
+        assert ready, "no URL printed within 180 s"
+        url = proc.stdout.readline().strip()
+        # one clean line: the URL of the web viewer, its gRPC proxy on the same host
+        m = re.fullmatch(
+            r"http://127\.0\.0\.1:(\d+)/\?url=rerun%2Bhttp%3A%2F%2F127\.0\.0\.1%3A(\d+)%2Fproxy",
+            url,
+        )
+        assert m, url
+        http_port, grpc_port = int(m.group(1)), int(m.group(2))
+        for port in (http_port, grpc_port):
+            # bound to the loopback address only (127.0.0.1 is 0100007F in /proc/net/tcp)
+            assert listening_sockets(port) == ["0100007F"], (port, listening_sockets(port))
+        viewers = children(proc.pid)
+        assert len(viewers) == 1 and all(alive(p) for p in viewers)
+        assert any(tmp.iterdir())  # its temporary directory, while it runs
+        proc.send_signal(signal.SIGTERM)
+        _, err = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    assert proc.returncode == 128 + signal.SIGTERM
+    assert "no display" in err and "web viewer" in err
+    assert "Traceback" not in err
+    deadline = time.monotonic() + 10
+    while any(alive(p) for p in viewers) and time.monotonic() < deadline:
+        time.sleep(0.1)
+    assert not any(alive(p) for p in viewers), "the viewer outlived isaac view"
+    assert not listening_sockets(http_port) and not listening_sockets(grpc_port)
+    assert list(tmp.iterdir()) == []
+    # next to the log: only the log and its kept Rerun copy (no .partial)
+    assert sorted(p.name for p in logs.iterdir()) == ["run.mcap", "run.mcap.rrd"]
+
+
+def test_view_keeps_the_rerun_copy_of_an_mcap_log_while_the_log_is_unchanged(tmp_path):
+    log = tmp_path / "run.mcap"
+    record_run(log, n=5, contacts=2, steps=15)
+    copy = Path(str(log) + ".rrd")
+    out = run_cli("view", str(log), "--web", "--dry-run")
+    assert out.returncode == 0, out.stderr
+    assert str(copy) in out.stdout.split()
+    first = os.stat(copy)
+    assert first.st_mtime_ns == os.stat(log).st_mtime_ns
+    assert run_cli("view", str(log), "--web", "--dry-run").returncode == 0
+    assert os.stat(copy).st_ino == first.st_ino  # reused, not written again
+    # the log changes (here: its time): converted again
+    os.utime(log, ns=(first.st_atime_ns, first.st_mtime_ns + 1_000_000_000))
+    assert run_cli("view", str(log), "--web", "--dry-run").returncode == 0
+    second = os.stat(copy)
+    assert second.st_ino != first.st_ino
+    assert second.st_mtime_ns == os.stat(log).st_mtime_ns
+    # --fresh converts even a current copy
+    assert run_cli("view", str(log), "--web", "--dry-run", "--fresh").returncode == 0
+    assert os.stat(copy).st_ino != second.st_ino
+
+
+def test_view_binds_127_0_0_1_unless_told_and_takes_the_ports_given(tmp_path):
+    log = tmp_path / "run.rrd"
+    record_run(tmp_path / "run.mcap", n=4, contacts=1, steps=5, rrd=log)
+    out = run_cli("view", str(log), "--dry-run")
+    command = out.stdout.split()
+    assert command[command.index("--bind") + 1] == "127.0.0.1"
+    assert int(command[command.index("--port") + 1]) > 0  # a free port, not Rerun's 9876
+    out = run_cli(
+        "view", str(log), "--web", "--bind", "0.0.0.0", "--port", "8123", "--grpc-port", "8124",
+        "--dry-run",
+    )  # fmt: skip
+    command = out.stdout.split()
+    assert command[command.index("--bind") + 1] == "0.0.0.0"
+    assert command[command.index("--web-viewer-port") + 1] == "8123"
+    assert command[command.index("--port") + 1] == "8124"
