@@ -13,6 +13,8 @@ import sys
 import time
 from pathlib import Path
 
+import pytest
+
 sys.path.insert(0, str(Path(__file__).parent / "recorder"))
 from test_recorder_mcap import PYTHON, REPO, record_run, run_cli  # noqa: E402
 
@@ -46,7 +48,10 @@ def alive(pid: int) -> bool:
     return True
 
 
-def test_view_without_a_display_serves_localhost_and_sigterm_leaves_nothing_behind(tmp_path):
+@pytest.mark.parametrize("signum", [signal.SIGTERM, signal.SIGINT], ids=["SIGTERM", "Ctrl-C"])
+def test_view_without_a_display_serves_localhost_and_a_signal_leaves_nothing_behind(
+    tmp_path, signum
+):
     logs, tmp = tmp_path / "logs", tmp_path / "tmp"
     logs.mkdir()
     tmp.mkdir()
@@ -79,13 +84,13 @@ def test_view_without_a_display_serves_localhost_and_sigterm_leaves_nothing_behi
         viewers = children(proc.pid)
         assert len(viewers) == 1 and all(alive(p) for p in viewers)
         assert any(tmp.iterdir())  # its temporary directory, while it runs
-        proc.send_signal(signal.SIGTERM)
+        proc.send_signal(signum)
         _, err = proc.communicate(timeout=60)
     finally:
         if proc.poll() is None:
             proc.kill()
             proc.wait()
-    assert proc.returncode == 128 + signal.SIGTERM
+    assert proc.returncode == 128 + signum
     assert "no display" in err and "web viewer" in err
     assert "Traceback" not in err
     deadline = time.monotonic() + 10
