@@ -11,8 +11,8 @@ The result is the Scene the YAML reader gives for the same text, or None when th
 the writer's form line for line (then the YAML reader reads it). A body that matches but does
 not pass the checks is read again, alone, by the YAML reader, so its message is the one the
 YAML reader gives, with its line. The accepted form is strict: each line exactly as the writer
-writes it, numbers as `repr(float)` writes them (a "." or an exponent), names without escapes
-other than \\" and \\\\.
+writes it, numbers as `repr(float)` writes them (a "." or an exponent) or, for a time the
+author wrote as a fraction, as written (`1/120`), names without escapes other than \\" and \\\\.
 """
 
 from __future__ import annotations
@@ -22,18 +22,19 @@ import re
 from isaac.errors import SceneError
 from isaac.scene import checks
 from isaac.scene.limits import MAX_BODIES, MAX_VERTICES, MAX_YAML_BYTES
-from isaac.scene.reader import Reader, compose, shown
+from isaac.scene.reader import Reader, compose, fraction, shown
 from isaac.scene.spec import BodySpec, Scene
 
 _F = r"-?[0-9]+(?:\.[0-9]+(?:e[-+][0-9]+)?|e[-+][0-9]+)"  # repr(float) of a finite float
 _PAIR = rf"\[{_F}, {_F}\]"
+_TIME = rf"{_F}|[0-9]+/[0-9]+"  # a time as repr writes it, or as the author wrote a fraction
 _QUOTED = r'"(?:[^"\\\n]|\\[^\n])*"'  # one line; the YAML reader decodes it (head only)
 _NAME = r'"((?:[^"\\\n]|\\["\\])*)"'
 
 # `name:`, `world:` and one line per world setting, each value a whole flow scalar or a pair on
 # its line, so nothing in the head can reach past `bodies:`.
 _HEAD = re.compile(
-    rf"name: {_QUOTED}\nworld:\n(?:  [a-z_]+: (?:{_QUOTED}|[-+.0-9a-z_]+|{_PAIR})\n)*bodies:\n"
+    rf"name: {_QUOTED}\nworld:\n(?:  [a-z_]+: (?:{_QUOTED}|[-+./0-9a-z_]+|{_PAIR})\n)*bodies:\n"
 )
 _BODY = re.compile(
     rf"""  - name: {_NAME}
@@ -46,8 +47,8 @@ _BODY = re.compile(
     restitution: ({_F})
     friction: ({_F})
     concrete: (true|false)
-    enters_at: ({_F})
-    leaves_at: ({_F}|null)
+    enters_at: ({_TIME})
+    leaves_at: ({_TIME}|null)
 """
 )
 _BODY_LINES = 12
@@ -72,6 +73,7 @@ def read(text: str, source: str, default_name: str, read_head, body_alone) -> Sc
     first_line = text.count("\n", 0, pos) + 1  # the line of the first body's `- name:`
     bodies: list[BodySpec] = []
     starts: list[int] = []
+    fractions: list[tuple[str, str]] = []  # (key path, text) of the bodies' times as fractions
     match = _BODY.match
     while (found := match(text, pos)) is not None:
         if len(bodies) == MAX_BODIES:
@@ -82,7 +84,10 @@ def read(text: str, source: str, default_name: str, read_head, body_alone) -> Sc
                 path="bodies",
             )
         starts.append(pos)
-        bodies.append(_body(found))
+        try:
+            bodies.append(_body(found, len(bodies), fractions))
+        except ValueError:
+            return None  # a fraction that divides by zero: the YAML reader says so, at its line
         pos = found.end()
     r = Reader(source)
     if _TAIL.match(text, pos) is None:
@@ -127,10 +132,24 @@ def read(text: str, source: str, default_name: str, read_head, body_alone) -> Sc
             line=first_line + _BODY_LINES * i,
             path=f"bodies[{i}].name",
         )
-    return Scene(name=name, world=world, bodies=tuple(bodies), source=source, analytic=analytic)
+    return Scene(
+        name=name,
+        world=world,
+        bodies=tuple(bodies),
+        source=source,
+        analytic=analytic,
+        as_written=tuple(r.as_written + fractions),
+    )
 
 
-def _body(found: re.Match) -> BodySpec:
+def _time(text: str, path: str, fractions: list) -> float:
+    if "/" in text:
+        fractions.append((path, text))
+        return fraction(text)
+    return float(text)
+
+
+def _body(found: re.Match, index: int, fractions: list) -> BodySpec:
     (name, vertices, px, py, angle, vx, vy, spin, density, restitution, friction, concrete,
      enters_at, leaves_at) = found.groups()  # fmt: skip
     if "\\" in name:
@@ -148,6 +167,10 @@ def _body(found: re.Match) -> BodySpec:
         restitution=float(restitution),
         friction=float(friction),
         concrete=concrete == "true",
-        enters_at=float(enters_at),
-        leaves_at=None if leaves_at == "null" else float(leaves_at),
+        enters_at=_time(enters_at, f"bodies[{index}].enters_at", fractions),
+        leaves_at=(
+            None
+            if leaves_at == "null"
+            else _time(leaves_at, f"bodies[{index}].leaves_at", fractions)
+        ),
     )

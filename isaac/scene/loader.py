@@ -71,7 +71,7 @@ def _world_value(r: Reader, key: str, node, path: str):
     if key == "gravity":
         return r.pair(node, path, -MAX_GRAVITY, MAX_GRAVITY)
     if key == "dt":
-        return r.number(node, path, 0.0, 1.0, lo_open=True)
+        return r.time(node, path, 0.0, 1.0, lo_open=True)
     if key == "steps":
         return r.integer(node, path, 1, MAX_STEPS)
     if key == "substeps":
@@ -174,11 +174,11 @@ def _read_body(r: Reader, node, path: str, index: int) -> BodySpec:
     if "shape" not in m:
         raise r.fail("missing key 'shape'", node, path)
     name = optional(r.name, m, "name", path, f"body/{index + 1}")
-    enters_at = optional(r.number, m, "enters_at", path, 0.0, 0.0, MAX_TIME)
+    enters_at = optional(r.time, m, "enters_at", path, 0.0, 0.0, MAX_TIME)
     leaves_at = None
     if "leaves_at" in m and scalar_or_none(m["leaves_at"][1]) is not None:
         leaves_path = join_path(path, "leaves_at")
-        leaves_at = r.number(m["leaves_at"][1], leaves_path, 0.0, MAX_TIME)
+        leaves_at = r.time(m["leaves_at"][1], leaves_path, 0.0, MAX_TIME)
         if leaves_at <= enters_at:
             raise r.fail(
                 f"leaves_at ({leaves_at!r} s) must be later than enters_at ({enters_at!r} s)",
@@ -564,6 +564,7 @@ def _read_scene(r: Reader, root, default_name: str) -> Scene:
         source=r.source,
         analytic=analytic,
         marks=marks,
+        as_written=tuple(r.as_written),
     )
 
 

@@ -19,6 +19,7 @@ from __future__ import annotations
 import difflib
 import math
 import re
+from fractions import Fraction
 
 import yaml
 
@@ -38,6 +39,8 @@ _INT_RE = re.compile(r"[-+]?[0-9]+\Z")
 _FLOAT_RE = re.compile(r"[-+]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][-+]?[0-9]+)?\Z")
 _NONFINITE_RE = re.compile(r"[-+]?\.?(?:nan|inf|infinity)\Z", re.IGNORECASE)
 _NULLS = ("null", "~", "")
+# a time written as a fraction of whole numbers: `dt: 1/120`
+_FRACTION_RE = re.compile(r"[-+]?[0-9]+/[0-9]+\Z")
 _BOOLEAN_SPELLINGS = {
     **dict.fromkeys(("true", "yes", "on", "y"), "true"),
     **dict.fromkeys(("false", "no", "off", "n"), "false"),
@@ -288,11 +291,29 @@ def _suggestion(text: str, options) -> str | None:
     return close[0] if close else None
 
 
+def fraction(text: str) -> float:
+    """The float nearest the fraction `text` ("1/120", whole numbers either side), correctly
+    rounded (`fractions.Fraction`), so `1/120` is the float Python's 1 / 120 gives. ValueError
+    with a one-line reason for anything else or a zero denominator. `isaac tradeoff --grid dt=`
+    and the scene's times read fractions through this one function."""
+    text = text.strip()
+    if not _FRACTION_RE.match(text):
+        raise ValueError(f"cannot read {_cut(text)} as a fraction of whole numbers")
+    try:
+        return float(Fraction(text))
+    except ZeroDivisionError:
+        raise ValueError(f"the fraction {_cut(text)} divides by zero") from None
+
+
 class Reader:
-    """Typed access to a composed node tree; every failure is a SceneError with line and path."""
+    """Typed access to a composed node tree; every failure is a SceneError with line and path.
+
+    as_written: (key path, text) of every time read as a fraction, in reading order, so the
+    scene's text can be written back as the author wrote it (Scene.as_written)."""
 
     def __init__(self, source: str) -> None:
         self.source = source
+        self.as_written: list[tuple[str, str]] = []
 
     def fail(self, what: str, node=None, path: str = "") -> SceneError:
         return SceneError(
@@ -356,6 +377,30 @@ class Reader:
                 f"{_cut(node.value)} is out of range (must be {low} and <= {hi!r})", node, path
             )
         return value
+
+    def time(self, node, path: str, lo: float, hi: float, *, lo_open: bool = False) -> float:
+        """A time (s): a number as `number` reads it, or a fraction written `N/D` (`1/120`),
+        which is kept in `as_written`."""
+        value = scalar(node) if isinstance(node, ScalarNode) else None
+        if not (isinstance(value, str) and "/" in value):
+            return self.number(node, path, lo, hi, lo_open=lo_open)
+        try:
+            seconds = fraction(value)
+        except ValueError as exc:
+            raise self.fail(
+                f"{exc}; give seconds (0.01) or whole numbers either side of one / (1/120)",
+                node,
+                path,
+            ) from None
+        if not (seconds > lo if lo_open else seconds >= lo) or not seconds <= hi:
+            low = f"> {lo!r}" if lo_open else f">= {lo!r}"
+            raise self.fail(
+                f"{_cut(value)} = {seconds!r} s is out of range (must be {low} and <= {hi!r})",
+                node,
+                path,
+            )
+        self.as_written.append((path, value.strip()))
+        return seconds
 
     def integer(self, node, path: str, lo: int, hi: int) -> int:
         value = scalar(node) if isinstance(node, ScalarNode) else None

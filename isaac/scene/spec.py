@@ -65,6 +65,9 @@ class Scene:
     analytic: optional analytic reference the scene declares (used by `isaac tradeoff`), or None.
     marks: where the YAML gave each body (SceneMarks), or None (a scene built in Python or read
         from a log's text); never compared, so it does not change what a scene is.
+    as_written: (key path, text) of each time the scene gives as a fraction (`world.dt`,
+        `bodies[3].enters_at`: `1/120`); `scene_to_yaml` writes them so, and the log's scene
+        text keeps them as the author wrote them. Never compared: the values are the floats.
     """
 
     name: str
@@ -73,3 +76,4 @@ class Scene:
     source: str = "<scene>"
     analytic: dict | None = None
     marks: SceneMarks | None = field(default=None, compare=False, repr=False)
+    as_written: tuple[tuple[str, str], ...] = field(default=(), compare=False, repr=False)

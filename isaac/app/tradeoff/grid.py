@@ -5,10 +5,10 @@ from __future__ import annotations
 import itertools
 import math
 from dataclasses import dataclass, fields, replace
-from fractions import Fraction
 
 from isaac.errors import IsaacError, SceneError
 from isaac.scene import PRESETS, WorldSettings, load_scene_text
+from isaac.scene.reader import fraction
 
 PRESET_ORDER = ("seed", "fast", "balanced", "accurate")
 DEFAULT_DT_FACTORS = (2.0, 1.0, 0.5)  # the default dt axis: the scene's dt times these
@@ -50,12 +50,13 @@ def parse_dt(text: str, scene_dt: float) -> float:
     """A dt value: seconds ("0.01", "1e-3"), a fraction ("1/60"), or a multiple of the scene's
     dt ("x2", "x1/2")."""
     text = text.strip()
+
+    def number(part: str) -> float:  # fractions read as a scene's times are (one parser)
+        return fraction(part) if "/" in part else float(part)
+
     try:
-        if text.startswith("x"):
-            value = float(Fraction(text[1:])) * scene_dt
-        else:
-            value = float(Fraction(text)) if "/" in text else float(text)
-    except (ValueError, ZeroDivisionError):
+        value = number(text[1:]) * scene_dt if text.startswith("x") else number(text)
+    except ValueError:
         raise TradeoffError(
             f"--grid dt: cannot read {text!r} as a time step (use 0.01, 1/60 or "
             f"x2 for twice the scene's dt)"
