@@ -15,7 +15,13 @@ import sys
 from isaac.errors import IsaacError
 
 # Modules that add sub-commands; a module that is not there (yet) is skipped.
-COMMAND_MODULES = ("isaac.app.run", "isaac.app.logs", "isaac.app.verify", "isaac.app.tradeoff")
+COMMAND_MODULES = (
+    "isaac.app.run",
+    "isaac.app.logs",
+    "isaac.app.verify",
+    "isaac.app.tradeoff",
+    "isaac.app.sweep",
+)
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -1,0 +1,437 @@
+"""`isaac sweep SWEEP.yaml`: the runs fanned out over Dask, their rows gathered into one table.
+
+Outline of `execute`:
+
+1. read     the sweep file and its scene; every run's scene checked by the scene loader (bad
+            input: one line, exit 2, before anything runs or is written).
+2. folder   OUT/ made, or found holding this same sweep (resume); the rows of finished runs
+            whose logs are complete are kept, the other runs are to do.
+3. warm up  the kernels of each distinct world setting compiled into numba's on-disk cache once
+            (here for a local cluster, on one worker for a remote one), before the fan-out.
+4. fan out  chunks of runs as Dask tasks (`worker.run_chunk`); rows come back as chunks finish,
+            with a progress bar over runs.
+5. gather   runs.parquet (every row, by index), the PNG plots, and the summary.
+
+Ctrl-C (or SIGTERM) cancels the tasks, shuts the cluster down and writes the rows finished so
+far; running the same command again resumes.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import math
+import os
+import shutil
+import signal
+import sys
+import time
+from dataclasses import dataclass
+
+from isaac.app.sweep import worker as work
+from isaac.app.sweep.spec import Sweep, SweepError, check_runs, load_sweep
+from isaac.errors import IsaacError
+
+MAX_CHUNK = 20  # runs per task at most: a killed worker's chunk is rescheduled whole
+TASKS_PER_WORKER = 8  # at least this many tasks per worker while runs last (load balance)
+MAX_WARM_UP = 8  # distinct world settings compiled before the fan-out (others as they come)
+
+
+@dataclass
+class SweepResult:
+    """What a sweep did: `table` (pyarrow.Table, one row per finished run, by index), counts,
+    wall time (s) and where it wrote."""
+
+    table: object
+    sweep: Sweep
+    out: str
+    kept: int
+    ran: int
+    seconds: float
+    workers: int
+    plots: list | None
+    interrupted: bool = False
+
+    @property
+    def failed(self) -> int:
+        return sum(1 for s in self.table.column("status").to_pylist() if s != "ok")
+
+
+def register(subparsers) -> None:
+    p = subparsers.add_parser(
+        "sweep",
+        help="run a scene many times (grid and random parameters) over Dask; one results table",
+        description="Run the sweep file's runs (docs/sweep-format.md) on a local Dask cluster "
+        "(one worker process per core) or an existing one; write OUT/runs.parquet, the logs, "
+        "plots and a summary. Running the same command again resumes.",
+    )
+    p.add_argument("sweep", help="sweep file (YAML)")
+    p.add_argument(
+        "-o", "--out", help="output folder (default: runs/STEM, STEM the sweep file's name)"
+    )
+    p.add_argument(
+        "--scheduler",
+        metavar="ADDRESS",
+        help="run on this Dask scheduler (tcp://HOST:8786; default: $DASK_SCHEDULER_ADDRESS, "
+        "else a local cluster); OUT must then be an absolute path every worker can write",
+    )
+    p.add_argument(
+        "--workers", type=int, metavar="N", help="local cluster size (default: one per core)"
+    )
+    p.add_argument(
+        "--chunk", type=int, metavar="K", help=f"runs per task (default: up to {MAX_CHUNK})"
+    )
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.add_argument("--no-plots", action="store_true", help="write no PNG plots")
+    p.set_defaults(func=cmd_sweep)
+
+
+def default_out(sweep_path: str) -> str:
+    name = os.path.basename(sweep_path)
+    stem = name[:-5] if name.endswith(".yaml") else os.path.splitext(name)[0]
+    return os.path.join("runs", stem)
+
+
+def run(sweep_path, out=None, *, client=None, scheduler=None, workers=None, chunk=None):
+    """Run the sweep file `sweep_path` into folder `out` (default runs/STEM) and return its
+    results table (pyarrow.Table; `.to_pandas()` with pandas installed).
+
+    client: a `dask.distributed.Client` to run on (default: `scheduler`, else
+    $DASK_SCHEDULER_ADDRESS, else a local cluster of `workers` processes, started and shut
+    down here). Raises SweepError / SceneError for bad input, KeyboardInterrupt when
+    interrupted (after writing the rows finished so far).
+    """
+    result = execute(
+        str(sweep_path), out, client=client, scheduler=scheduler, workers=workers, chunk=chunk
+    )
+    if result.interrupted:
+        raise KeyboardInterrupt
+    return result.table
+
+
+def _prepare_out(sweep: Sweep, out: str) -> None:
+    """Make OUT, or check that it holds this sweep (then it is resumed); copy the sweep file
+    and its scene there. SweepError when OUT holds something else."""
+    copy = os.path.join(out, "sweep.yaml")
+    scene_copy = os.path.join(out, "scene.yaml")
+    if os.path.lexists(out) and not os.path.isdir(out):
+        raise SweepError(f"--out {out} is not a folder", source=sweep.path)
+    if os.path.isdir(out) and os.listdir(out):
+        if not os.path.isfile(copy):
+            raise SweepError(
+                f"--out {out} is not empty and holds no sweep: choose an empty or new folder",
+                source=sweep.path,
+            )
+        for path, text, what in (
+            (copy, sweep.text, "sweep file"),
+            (scene_copy, sweep.scene_text, "scene"),
+        ):
+            try:
+                with open(path, encoding="utf-8") as f:
+                    same = f.read() == text
+            except OSError:
+                same = False
+            if not same:
+                raise SweepError(
+                    f"--out {out} holds a sweep of another {what} ({path} differs): resume "
+                    "only with the same files, or choose another folder",
+                    source=sweep.path,
+                )
+    try:
+        for sub in ("", work.LOGS_DIR, work.TMP_DIR, work.ROWS_DIR):
+            os.makedirs(os.path.join(out, sub), exist_ok=True)
+        for path, text in ((copy, sweep.text), (scene_copy, sweep.scene_text)):
+            if not os.path.exists(path):
+                with open(path + ".tmp", "w", encoding="utf-8") as f:
+                    f.write(text)
+                os.replace(path + ".tmp", path)
+    except OSError as exc:
+        raise SweepError(
+            f"cannot write --out {out}: {exc.strerror or exc}", source=sweep.path
+        ) from None
+
+
+class _IgnoreInterrupt:
+    """Worker plugin of the local cluster: Ctrl-C reaches every process of the terminal's group;
+    the workers leave it to the client, which cancels their tasks and shuts them down (a worker
+    interrupted on its own would print tracebacks and be restarted)."""
+
+    name = "isaac-sweep-ignore-sigint"
+
+    def setup(self, worker=None) -> None:
+        try:
+            signal.signal(signal.SIGINT, signal.SIG_IGN)
+        except ValueError:  # not the main thread of the worker process
+            pass
+
+
+def _start(scheduler, workers):
+    """(client, cluster or None, whether the workers are on this machine)."""
+    from dask.distributed import Client, LocalCluster
+
+    address = scheduler or os.environ.get("DASK_SCHEDULER_ADDRESS")
+    if address:
+        return Client(address), None
+    n = workers or len(os.sched_getaffinity(0))  # one worker process per core we may use
+    cluster = LocalCluster(
+        n_workers=n,
+        threads_per_worker=1,
+        processes=True,
+        host="127.0.0.1",  # scheduler and workers listen on this machine only
+        dashboard_address=None,
+        # no dashboard; the scheduler's HTTP routes (health, metrics) on a free port of
+        # 127.0.0.1 (its default, 8787, is taken by a second sweep or another cluster)
+        scheduler_kwargs={"dashboard": False, "dashboard_address": "127.0.0.1:0"},
+        silence_logs=logging.ERROR,
+    )
+    client = Client(cluster)
+    from distributed.diagnostics.plugin import WorkerPlugin
+
+    plugin = type("IgnoreInterrupt", (_IgnoreInterrupt, WorkerPlugin), {})()
+    client.register_plugin(plugin)
+    return client, cluster
+
+
+def _tasks(sweep: Sweep, todo: list[int], out: str, chunk: int) -> list[dict]:
+    base = {
+        "out": out,
+        "record": sweep.record,
+        "steps": sweep.steps,
+        "metrics": list(sweep.metrics),
+        "final_bodies": list(sweep.final_bodies),
+        "scene_path": sweep.scene_path,
+        "scene_name": sweep.scene_name,
+    }
+    tasks = []
+    for start in range(0, len(todo), chunk):
+        runs = [
+            {"index": i, "scene_text": sweep.run_scene_text(i), "params": sweep.params(i)}
+            for i in todo[start : start + chunk]
+        ]
+        tasks.append({**base, "runs": runs})
+    return tasks
+
+
+def execute(
+    sweep_path: str,
+    out: str | None = None,
+    *,
+    client=None,
+    scheduler=None,
+    workers=None,
+    chunk=None,
+    progress: bool = False,
+    plots: bool = True,
+) -> SweepResult:
+    """Steps 1-5 of the module docstring; see `run`."""
+    started = time.perf_counter()
+    sweep = load_sweep(sweep_path)
+    remote = client is not None or bool(scheduler or os.environ.get("DASK_SCHEDULER_ADDRESS"))
+    out = out or default_out(sweep_path)
+    if remote and client is None and not os.path.isabs(out):
+        raise SweepError(
+            f"--out {out}: with a scheduler, give an absolute path on storage every worker can "
+            "write (the workers write the logs there)",
+            source=sweep.path,
+        )
+    if workers is not None and workers < 1:
+        raise IsaacError(f"--workers must be >= 1, got {workers}")
+    if chunk is not None and chunk < 1:
+        raise IsaacError(f"--chunk must be >= 1, got {chunk}")
+    worlds = check_runs(sweep)
+    from isaac.app.sweep import table as results  # pyarrow: imported when a sweep runs
+
+    out = os.path.abspath(out)
+    _prepare_out(sweep, out)
+    schema = results.schema(sweep)
+    kept = results.kept_rows(out, sweep.n_runs, schema)
+    todo = [i for i in range(sweep.n_runs) if i not in kept]
+    done: dict[int, dict] = dict(kept)
+    interrupted = False
+    n_workers = 0
+    if todo:
+        interrupted, n_workers = _fan_out(
+            sweep, todo, out, done, worlds, client, scheduler, workers, chunk, progress
+        )
+    table = results.to_table(list(done.values()), schema)
+    results.write(table, out)
+    written = None
+    if not interrupted:
+        # every row is in the table: the per-run rows and the killed runs' files go
+        shutil.rmtree(os.path.join(out, work.ROWS_DIR), ignore_errors=True)
+        shutil.rmtree(os.path.join(out, work.TMP_DIR), ignore_errors=True)
+        if plots:
+            from isaac.app.sweep.plots import plot_all
+
+            written = plot_all(table, sweep, out)
+        else:
+            written = []
+    return SweepResult(
+        table=table,
+        sweep=sweep,
+        out=out,
+        kept=len(kept),
+        ran=len(done) - len(kept),
+        seconds=time.perf_counter() - started,
+        workers=n_workers,
+        plots=written,
+        interrupted=interrupted,
+    )
+
+
+def _fan_out(sweep, todo, out, done, worlds, client, scheduler, workers, chunk, progress):
+    """Steps 3 and 4; fills `done` {index: row}. Returns (interrupted, workers used)."""
+    from dask.distributed import as_completed
+
+    warm = [sweep.run_scene_text(i) for i in sorted(worlds.values())[:MAX_WARM_UP]]
+    own = client is None
+    cluster = None
+    bar = None
+    futures = []
+    interrupted = False
+    n_workers = 0
+    try:
+        local = own and not (scheduler or os.environ.get("DASK_SCHEDULER_ADDRESS"))
+        if local:
+            # the workers share this machine's numba cache: fill it once, here
+            work.warm_up(warm, sweep.scene_path, sweep.scene_name)
+        if own:
+            client, cluster = _start(scheduler, workers)
+        if local:
+            # each worker process loads them from the cache now, all at once, rather than
+            # inside its first run
+            client.run(work.warm_up, warm[:1], sweep.scene_path, sweep.scene_name)
+        else:
+            client.submit(
+                work.warm_up, warm, sweep.scene_path, sweep.scene_name, pure=False
+            ).result()
+        n_workers = max(1, len(client.scheduler_info().get("workers", {})))
+        size = chunk or max(
+            1, min(MAX_CHUNK, math.ceil(len(todo) / (n_workers * TASKS_PER_WORKER)))
+        )
+        tasks = _tasks(sweep, todo, out, size)
+        if progress:
+            from tqdm import tqdm
+
+            bar = tqdm(total=sweep.n_runs, initial=len(done), unit="run", desc=sweep.scene_name)
+        futures = client.map(work.run_chunk, tasks, pure=False)
+        by_future = {f.key: t for f, t in zip(futures, tasks)}
+        for future in as_completed(futures):
+            task = by_future[future.key]
+            try:
+                rows = future.result()
+            except Exception as exc:  # noqa: BLE001 - e.g. KilledWorker: the chunk's runs fail
+                message = " ".join(f"{type(exc).__name__}: {exc}".split())
+                rows = [
+                    work.read_row(out, r["index"])
+                    or {"index": r["index"], **r["params"], "status": "failed", "error": message}
+                    for r in task["runs"]
+                ]
+            for row in rows:
+                done[row["index"]] = row
+            if bar is not None:
+                bar.update(len(rows))
+    except KeyboardInterrupt:
+        interrupted = True
+    finally:
+        # a second Ctrl-C must not cut the shutdown short
+        previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+        try:
+            if bar is not None:
+                bar.close()
+            if futures and client is not None:
+                client.cancel(futures)
+            if own and client is not None:
+                client.close()
+            if cluster is not None:
+                cluster.close()
+        finally:
+            signal.signal(signal.SIGINT, previous)
+    return interrupted, n_workers
+
+
+# --- the command line -----------------------------------------------------------------------
+
+
+def _summary(result: SweepResult) -> list[str]:
+    import pyarrow as pa
+
+    from isaac.app.sweep import table as results
+    from isaac.app.sweep.metrics import columns
+
+    t = result.table
+    sweep = result.sweep
+    rows = t.to_pylist()
+    ok = [r for r in rows if r["status"] == "ok"]
+    failed = [r for r in rows if r["status"] != "ok"]
+    rate = result.ran / result.seconds if result.seconds > 0 else 0.0
+    lines = [
+        f"sweep {sweep.path}: {len(rows)} of {sweep.n_runs} runs: {len(ok)} ok, {len(failed)} "
+        f"failed; {result.ran} run now ({result.kept} kept from before) in "
+        f"{result.seconds:.1f} s, {rate:.2f} runs/s"
+        + (f" on {result.workers} workers" if result.workers else "")
+    ]
+    numeric = [
+        f.name
+        for f in columns(sweep.metrics, sweep.final_bodies)
+        if pa.types.is_floating(f.type) or pa.types.is_integer(f.type)
+    ]
+    if ok and numeric:
+        width = max(len(n) for n in numeric)
+        lines.append(f"  {'metric (ok runs)':<{width}}  {'min':>12} {'median':>12} {'max':>12}")
+        for name in numeric:
+            vals = sorted(r[name] for r in ok if r[name] is not None)
+            if not vals:
+                continue
+            med = (
+                vals[len(vals) // 2]
+                if len(vals) % 2
+                else 0.5 * (vals[len(vals) // 2 - 1] + vals[len(vals) // 2])
+            )
+            lines.append(f"  {name:<{width}}  {vals[0]:>12.6g} {med:>12.6g} {vals[-1]:>12.6g}")
+    for r in failed[:5]:
+        lines.append(f"  failed: run {r['index']}: {r['error']}")
+    if len(failed) > 5:
+        lines.append(f"  ... and {len(failed) - 5} more failed runs (status column)")
+    lines.append(f"  table: {os.path.join(result.out, results.TABLE)}")
+    if sweep.record != "none":
+        lines.append(f"  logs: {os.path.join(result.out, work.LOGS_DIR)}/run-NNNNNN.mcap")
+    if result.plots is None and not result.interrupted:
+        lines.append(
+            "  plots: skipped (matplotlib is not installed: pip install 'isaac-physics[plot]')"
+        )
+    elif result.plots:
+        lines.append(
+            f"  plots: {len(result.plots)} PNG files in {os.path.join(result.out, 'plots')}"
+        )
+    return lines
+
+
+def cmd_sweep(args: argparse.Namespace) -> int:
+    def stop(signum, frame):  # SIGTERM and SIGHUP stop the sweep as Ctrl-C does
+        raise KeyboardInterrupt
+
+    previous = {s: signal.signal(s, stop) for s in (signal.SIGTERM, signal.SIGHUP)}
+    try:
+        result = execute(
+            args.sweep,
+            args.out,
+            scheduler=args.scheduler,
+            workers=args.workers,
+            chunk=args.chunk,
+            progress=not args.quiet and sys.stderr.isatty(),
+            plots=not args.no_plots,
+        )
+    finally:
+        for s, h in previous.items():
+            signal.signal(s, h)
+    for line in _summary(result):
+        print(line)
+    if result.interrupted:
+        print(
+            f"isaac sweep: interrupted: {len(result.table)} of {result.sweep.n_runs} runs are "
+            "in the table; run the same command again to resume",
+            file=sys.stderr,
+        )
+        return 130
+    return 1 if result.failed else 0

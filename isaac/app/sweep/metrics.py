@@ -1,0 +1,145 @@
+"""What a sweep measures of each run, from the simulation's own step batches (docs/sweep-format.md
+defines each column).
+
+`Measure` sees the initial record and then every `StepBatch` the run yields, and keeps a few
+numbers: nothing here re-simulates or re-derives physics beyond the engine's diagnostics
+(energies) and the tunneling test that `isaac tradeoff` uses (the segment each body's centre
+travels in a step, clipped against the concrete polygons).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+# name -> what it is (the columns each adds: `columns`)
+METRICS = {
+    "final_state": "the state the run ended in",
+    "max_depth": "largest penetration of any contact point",
+    "energy_drift": "change of kinetic + potential energy",
+    "contacts": "contact points seen",
+    "tunneled": "moving bodies whose centre passed through a concrete body",
+}
+
+_BODY_FIELDS = (
+    ("x", "position", 0),
+    ("y", "position", 1),
+    ("angle", "angle", None),
+    ("vx", "velocity", 0),
+    ("vy", "velocity", 1),
+    ("omega", "angular_velocity", None),
+)
+
+
+def columns(metrics, final_bodies) -> list:
+    """The table's metric columns (pyarrow.Field), in order, for these metrics and bodies."""
+    import pyarrow as pa  # only where a table is made: `isaac --help` does without it
+
+    out: list[pa.Field] = []
+    for name in metrics:
+        if name == "final_state":
+            out += [
+                pa.field("final_step", pa.int64()),
+                pa.field("final_state_hash", pa.string()),
+                pa.field("final_com_x", pa.float64()),
+                pa.field("final_com_y", pa.float64()),
+            ]
+            for body in final_bodies:
+                out += [pa.field(f"final.{body}.{f}", pa.float64()) for f, _, _ in _BODY_FIELDS]
+        elif name == "max_depth":
+            out.append(pa.field("max_depth", pa.float64()))
+        elif name == "energy_drift":
+            out += [pa.field("energy_drift", pa.float64()), pa.field("energy_change", pa.float64())]
+        elif name == "contacts":
+            out += [pa.field("contacts", pa.int64()), pa.field("contact_steps", pa.int64())]
+        elif name == "tunneled":
+            out += [pa.field("tunneled", pa.int64()), pa.field("tunneled_bodies", pa.string())]
+    return out
+
+
+class Measure:
+    """The metrics of one run, fed the initial record (`__init__`) and then each batch."""
+
+    def __init__(self, sim, metrics, final_bodies) -> None:
+        from isaac.app.tradeoff.trajectory import _concrete_planes
+
+        self.metrics = tuple(metrics)
+        self.final_bodies = tuple(final_bodies)
+        self.model = sim.model
+        self.gravity = sim.scene.world.gravity
+        first = sim.record()
+        self.first = first
+        self.last = first
+        self.max_depth = 0.0
+        self.contacts = 0
+        self.contact_steps = 0
+        self.movable = ~np.asarray(self.model.concrete)
+        # concrete bodies never move: their edges in the world frame, once
+        self.planes = _concrete_planes(self.model, sim.state) if "tunneled" in self.metrics else []
+        self.tunneled = np.zeros(self.model.n_bodies, dtype=bool)
+
+    def add(self, batch) -> None:
+        """Take the records of `batch` (isaac.StepBatch), in order."""
+        counts = np.diff(np.asarray(batch.offsets, dtype=np.int64))
+        self.contacts += int(counts.sum())
+        self.contact_steps += int(np.count_nonzero(counts))
+        for s in np.flatnonzero(counts):
+            self.max_depth = max(self.max_depth, float(batch.contacts_of(int(s)).depth.max()))
+        if self.planes:
+            self._tunneling(batch)
+        self.last = batch.record(batch.steps - 1)
+
+    def _tunneling(self, batch) -> None:
+        from isaac.app.tradeoff.trajectory import _crossed_concrete
+
+        n = self.model.n_bodies
+        p1 = np.asarray(batch.position)
+        p0 = np.concatenate([np.asarray(self.last.position)[None], p1[:-1]])
+        e1 = np.asarray(batch.exists)
+        e0 = np.concatenate([np.asarray(self.last.exists)[None], e1[:-1]])
+        crossed = _crossed_concrete(self.planes, p0.reshape(-1, 2), p1.reshape(-1, 2))
+        crossed = crossed.reshape(-1, n) & e0 & e1 & self.movable
+        self.tunneled |= crossed.any(axis=0)
+
+    def values(self) -> dict:
+        """{column: value} for the metric columns (see `columns`)."""
+        from isaac.engine import diagnostics
+        from isaac.engine.records import state_hash
+
+        out: dict = {}
+        last = self.last
+        for name in self.metrics:
+            if name == "final_state":
+                out["final_step"] = int(last.step)
+                out["final_state_hash"] = state_hash(last)
+                w = np.where(np.asarray(last.exists) & self.movable, self.model.mass, 0.0)
+                total = float(w.sum())
+                pos = np.asarray(last.position)
+                out["final_com_x"] = float(w @ pos[:, 0]) / total if total > 0 else None
+                out["final_com_y"] = float(w @ pos[:, 1]) / total if total > 0 else None
+                names = list(self.model.names)
+                for body in self.final_bodies:
+                    k = names.index(body) if body in names else None
+                    for f, attr, c in _BODY_FIELDS:
+                        col = f"final.{body}.{f}"
+                        if k is None:
+                            out[col] = None
+                            continue
+                        arr = np.asarray(getattr(last, attr))
+                        out[col] = float(arr[k] if c is None else arr[k, c])
+            elif name == "max_depth":
+                out["max_depth"] = max(self.max_depth, 0.0)
+            elif name == "energy_drift":
+                e0 = diagnostics.summary(self.model, self.first, self.gravity)
+                e1 = diagnostics.summary(self.model, last, self.gravity)
+                start = e0.kinetic_energy + e0.potential_energy
+                end = e1.kinetic_energy + e1.potential_energy
+                out["energy_change"] = end - start
+                out["energy_drift"] = (end - start) / abs(start) if start != 0.0 else None
+            elif name == "contacts":
+                out["contacts"] = self.contacts
+                out["contact_steps"] = self.contact_steps
+            elif name == "tunneled":
+                hit = np.flatnonzero(self.tunneled)
+                out["tunneled"] = int(hit.size)
+                out["tunneled_bodies"] = ",".join(str(self.model.names[i]) for i in hit)
+        return out

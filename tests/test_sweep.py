@@ -1,0 +1,539 @@
+"""`isaac sweep`: a sweep file's runs over a local Dask cluster, one results table.
+
+Claims: the table and the log bytes do not depend on the number of workers, the chunking or a
+resume; the metrics agree with closed forms (free fall, tunneling through a thin wall with and
+without continuous collision); random draws depend on (seed, sample, key) alone; a diverging run
+is a failed row and the others complete; bad sweep files exit 2 in one line naming the file, the
+line and the key. Slow cases: a worker killed mid-sweep, Ctrl-C then resume, no JIT.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import logging
+import os
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+from pathlib import Path
+
+import numpy as np
+import pyarrow.parquet as pq
+import pytest
+
+from isaac.app.cli import main
+from isaac.app.sweep import execute, load_sweep
+from isaac.app.sweep.spec import check_runs, stream
+from isaac.app.sweep.table import TIMING_COLUMNS
+
+ROOT = Path(__file__).resolve().parents[1]
+SCENES = ROOT / "scenes"
+
+BOUNCE_SWEEP = """\
+scene: {scene}
+runs:
+  grid:
+    bodies.box.restitution: [0.2, 0.8]
+    world.dt: [0.01, 0.005]
+  random:
+    n: 10
+    seed: 7
+    bodies.box.velocity.x: {{uniform: [-5.0, 5.0]}}
+    bodies.box.angle: {{normal: [0.0, 0.1]}}
+steps: {steps}
+record: {record}
+"""
+
+
+def _write(tmp_path: Path, text: str, name: str = "s.sweep.yaml") -> Path:
+    path = tmp_path / name
+    path.write_text(textwrap.dedent(text))
+    return path
+
+
+@pytest.fixture(scope="module")
+def cluster():
+    """One local 2-worker cluster for the module (bound to 127.0.0.1, no dashboard)."""
+    from dask.distributed import Client, LocalCluster
+
+    with LocalCluster(
+        n_workers=2,
+        threads_per_worker=1,
+        processes=True,
+        host="127.0.0.1",
+        dashboard_address=None,
+        scheduler_kwargs={"dashboard": False, "dashboard_address": "127.0.0.1:0"},
+        silence_logs=logging.ERROR,
+    ) as c:
+        with Client(c) as client:
+            yield c, client
+
+
+def _comparable(table) -> list[dict]:
+    return [{k: v for k, v in r.items() if k not in TIMING_COLUMNS} for r in table.to_pylist()]
+
+
+def _log_bytes(out: str) -> dict[str, str]:
+    logs = Path(out) / "logs"
+    return {p.name: hashlib.sha256(p.read_bytes()).hexdigest() for p in sorted(logs.glob("run-*"))}
+
+
+def test_table_and_logs_are_the_same_with_one_and_two_workers_and_any_chunking(tmp_path, cluster):
+    sweep = _write(
+        tmp_path, BOUNCE_SWEEP.format(scene=SCENES / "bounce.yaml", steps=40, record="mcap")
+    )
+    import dask
+
+    _, client = cluster
+    two = execute(str(sweep), str(tmp_path / "two"), client=client, chunk=3)
+    # every task of the second sweep on one worker process
+    first_worker = sorted(client.scheduler_info()["workers"])[0]
+    with dask.annotate(workers=[first_worker], allow_other_workers=False):
+        one = execute(str(sweep), str(tmp_path / "one"), client=client, chunk=7, plots=False)
+    assert two.table.num_rows == one.table.num_rows == 40
+    assert two.table.column("index").to_pylist() == list(range(40))
+    assert _comparable(two.table) == _comparable(one.table)
+    assert set(one.table.column("worker").to_pylist()) == {first_worker}
+    assert len(set(two.table.column("worker").to_pylist())) == 2
+    assert all(s == "ok" for s in two.table.column("status").to_pylist())
+    logs = _log_bytes(two.out)
+    assert len(logs) == 40 and logs == _log_bytes(one.out)
+    # the table's sha256 is the file's
+    for row in two.table.to_pylist():
+        assert logs[os.path.basename(row["log_path"])] == row["log_sha256"]
+    # the same table read back from runs.parquet
+    assert _comparable(pq.read_table(Path(two.out) / "runs.parquet")) == _comparable(two.table)
+    # 4 grid points x 10 samples: sample i has the same drawn values at every grid point
+    rows = two.table.to_pylist()
+    for i in range(10):
+        xs = {rows[g * 10 + i]["bodies.box.velocity.x"] for g in range(4)}
+        assert len(xs) == 1
+    assert len({r["bodies.box.velocity.x"] for r in rows}) == 10
+    # a histogram of each varying metric and each against each parameter
+    names = {Path(p).name for p in two.plots}
+    assert "hist-final_com_x.png" in names and "hist-energy_drift.png" in names
+    assert "final_com_x-vs-bodies.box.velocity.x.png" in names
+    assert "hist-tunneled.png" not in names  # 0 in every run: no plot of a constant
+
+
+def test_resume_keeps_complete_runs_and_redoes_the_others(tmp_path, cluster):
+    _, client = cluster
+    sweep = _write(
+        tmp_path, BOUNCE_SWEEP.format(scene=SCENES / "bounce.yaml", steps=20, record="mcap")
+    )
+    out = tmp_path / "out"
+    first = execute(str(sweep), str(out), client=client, plots=False)
+    logs = _log_bytes(str(out))
+    # a lost log, a truncated one and a log of the right size but other bytes
+    (out / "logs" / "run-000003.mcap").unlink()
+    cut = out / "logs" / "run-000017.mcap"
+    cut.write_bytes(cut.read_bytes()[:1000])
+    other = out / "logs" / "run-000030.mcap"
+    data = bytearray(other.read_bytes())
+    data[-20] ^= 1
+    other.write_bytes(bytes(data))
+    again = execute(str(sweep), str(out), client=client, plots=False)
+    assert again.kept == 37 and again.ran == 3
+    assert _comparable(again.table) == _comparable(first.table)
+    assert _log_bytes(str(out)) == logs
+    # nothing left to do: every row kept
+    third = execute(str(sweep), str(out), client=client, plots=False)
+    assert third.kept == 40 and third.ran == 0
+
+
+def test_resume_refuses_a_folder_of_another_sweep(tmp_path, cluster, capsys):
+    _, client = cluster
+    sweep = _write(
+        tmp_path, BOUNCE_SWEEP.format(scene=SCENES / "bounce.yaml", steps=5, record="none")
+    )
+    out = tmp_path / "out"
+    execute(str(sweep), str(out), client=client, plots=False)
+    sweep.write_text(sweep.read_text().replace("seed: 7", "seed: 8"))
+    status = main(["sweep", str(sweep), "--out", str(out)])
+    err = capsys.readouterr().err
+    assert status == 2 and "holds a sweep of another sweep file" in err
+
+
+def _free_fall_y(y0: float, v0: float, g: float, dt: float, k: int) -> float:
+    """Semi-implicit Euler after k steps: v_j = v0 + j g dt, y_k = y0 + dt sum_{j=1..k} v_j."""
+    return y0 + k * dt * v0 + g * dt * dt * k * (k + 1) / 2
+
+
+def test_final_state_and_energy_of_a_free_fall_match_the_closed_form(tmp_path, cluster):
+    _, client = cluster
+    _write(
+        tmp_path,
+        """\
+        world: {gravity: [0.0, -9.81], dt: 0.01, steps: 50, fidelity: balanced}
+        bodies:
+          - name: ball
+            shape: {box: [0.5, 0.5]}
+            position: [0.0, 100.0]
+        """,
+        "fall.yaml",
+    )
+    sweep = _write(
+        tmp_path,
+        """\
+        scene: fall.yaml
+        runs:
+          grid:
+            bodies.ball.velocity.y: [0.0, 3.0, -2.5]
+            world.dt: [0.01, 0.02]
+        record: none
+        """,
+    )
+    table = execute(str(sweep), str(tmp_path / "out"), client=client, plots=False).table
+    for row in table.to_pylist():
+        v0, dt = row["bodies.ball.velocity.y"], row["world.dt"]
+        y = _free_fall_y(100.0, v0, -9.81, dt, 50)
+        assert row["final.ball.y"] == pytest.approx(y, rel=1e-12)
+        assert row["final.ball.vy"] == pytest.approx(v0 - 9.81 * dt * 50, rel=1e-12, abs=1e-12)
+        assert row["final_com_y"] == row["final.ball.y"]
+        mass = 0.25  # box 0.5 x 0.5 at density 1
+        e0 = 0.5 * mass * v0 * v0 + mass * 9.81 * 100.0
+        vy = v0 - 9.81 * dt * 50
+        e1 = 0.5 * mass * vy * vy + mass * 9.81 * y
+        assert row["energy_change"] == pytest.approx(e1 - e0, rel=1e-9, abs=1e-12)
+        assert row["energy_drift"] == pytest.approx((e1 - e0) / e0, rel=1e-9, abs=1e-15)
+        assert row["contacts"] == 0 and row["max_depth"] == 0.0 and row["tunneled"] == 0
+        assert row["final_step"] == 50 and row["status"] == "ok"
+
+
+def test_tunneling_is_counted_without_ccd_and_not_with_it(tmp_path, cluster):
+    _, client = cluster
+    sweep = _write(
+        tmp_path,
+        f"""\
+        scene: {SCENES / "tunnel.yaml"}
+        runs:
+          grid:
+            world.ccd: ["off", speculative]
+        record: none
+        metrics: [tunneled, contacts, max_depth]
+        """,
+    )
+    rows = execute(str(sweep), str(tmp_path / "out"), client=client, plots=False).table.to_pylist()
+    by_ccd = {r["world.ccd"]: r for r in rows}
+    assert by_ccd["off"]["tunneled"] == 1 and by_ccd["off"]["tunneled_bodies"] == "bullet"
+    assert by_ccd["off"]["contacts"] == 0
+    assert by_ccd["speculative"]["tunneled"] == 0 and by_ccd["speculative"]["contacts"] > 0
+
+
+def test_a_diverging_run_is_a_failed_row_and_the_others_complete(tmp_path, cluster, capsys):
+    _, client = cluster
+    scene = _write(
+        tmp_path,
+        """\
+        world: {gravity: [0.0, -10000.0], dt: 0.01, steps: 15000}
+        bodies:
+          - name: anvil
+            shape: {box: [1.0, 1.0]}
+        """,
+        "absurd.yaml",
+    )
+    del scene
+    sweep = _write(
+        tmp_path,
+        """\
+        scene: absurd.yaml
+        runs:
+          grid:
+            world.dt: [0.001, 1.0, 0.002]
+        record: none
+        """,
+    )
+    out = tmp_path / "out"
+    # closed form of the first step past 1e12 m at dt = 1 s (isaac.engine.integrate)
+    y, v, k = 0.0, 0.0, 0
+    while abs(y) <= 1e12:
+        k, v = k + 1, v - 10000.0
+        y += v
+    os.environ["DASK_SCHEDULER_ADDRESS"] = client.scheduler.address
+    try:
+        status = main(["sweep", str(sweep), "--out", str(out), "--quiet", "--no-plots"])
+    finally:
+        del os.environ["DASK_SCHEDULER_ADDRESS"]
+    printed = capsys.readouterr().out
+    assert status == 1
+    rows = pq.read_table(out / "runs.parquet").to_pylist()
+    assert [r["status"] for r in rows] == ["ok", "failed", "ok"]
+    assert f"step {k}" in rows[1]["error"] and "'anvil'" in rows[1]["error"]
+    assert rows[1]["final_step"] == k - 1  # the last good state
+    assert f"failed: run 1: step {k}" in printed
+
+
+BAD = [
+    ("unknown key path", "bodies.box.restitutio: [0.5]", 4, "runs.grid.bodies.box.restitutio"),
+    ("no such body", "bodies.crate.restitution: [0.5]", 4, "runs.grid.bodies.crate.restitution"),
+    ("made by nothing", "planets.0.mass: [1.0]", 4, "runs.grid.planets.0.mass"),
+    (
+        "out of range",
+        "bodies.box.restitution:\n      - 0.5\n      - 1.5",
+        6,
+        "runs.grid.bodies.box.restitution",
+    ),
+    ("list index", "bodies.box.position.z: [1.0]", 4, "runs.grid.bodies.box.position.z"),
+]
+
+
+@pytest.mark.parametrize("what, grid, line, key", BAD, ids=[b[0] for b in BAD])
+def test_bad_grid_exits_2_naming_file_line_and_key(tmp_path, capsys, what, grid, line, key):
+    sweep = _write(
+        tmp_path,
+        f"scene: {SCENES / 'bounce.yaml'}\nruns:\n  grid:\n    {grid}\nrecord: none\n",
+    )
+    status = main(["sweep", str(sweep), "--out", str(tmp_path / "out")])
+    err = capsys.readouterr().err
+    assert status == 2
+    assert err.count("\n") == 1 and "Traceback" not in err
+    assert f"{sweep}:{line}: {key}:" in err, err
+    assert not (tmp_path / "out").exists()  # refused before anything was written
+
+
+def test_out_of_range_value_names_the_run_and_the_scene_rule(tmp_path, capsys):
+    sweep = _write(
+        tmp_path,
+        f"""\
+        scene: {SCENES / "bounce.yaml"}
+        runs:
+          random:
+            n: 200
+            seed: 3
+            bodies.box.restitution: {{uniform: [0.5, 1.2]}}
+        """,
+    )
+    status = main(["sweep", str(sweep)])
+    err = capsys.readouterr().err
+    assert status == 2
+    assert f"{sweep}:6: runs.random.bodies.box.restitution: run " in err
+    assert "is out of range (must be >= 0.0 and <= 1.0)" in err
+    assert "(scene bodies[1].restitution)" in err
+    # the run it names is the first whose draw is above 1 (recomputed from the stream)
+    first = next(
+        i for i in range(200) if stream(3, i, "bodies.box.restitution").uniform(0.5, 1.2) > 1.0
+    )
+    assert f": run {first}: drawn value" in err
+
+
+RANDOM_BAD = [
+    (
+        "bad distribution",
+        "bodies.box.restitution: {gauss: [0, 1]}",
+        6,
+        "runs.random.bodies.box.restitution.gauss",
+        30,
+    ),
+    ("n = 0", None, 5, "runs.random.n", 0),
+    (
+        "low above high",
+        "bodies.box.restitution: {uniform: [0.9, 0.1]}",
+        6,
+        "runs.random.bodies.box.restitution.uniform",
+        30,
+    ),
+]
+
+
+@pytest.mark.parametrize("what, dist, line, key, n", RANDOM_BAD, ids=[b[0] for b in RANDOM_BAD])
+def test_bad_random_exits_2_naming_file_line_and_key(tmp_path, capsys, what, dist, line, key, n):
+    dist = dist or "bodies.box.restitution: {uniform: [0.1, 0.9]}"
+    sweep = _write(
+        tmp_path,
+        f"scene: {SCENES / 'bounce.yaml'}\nruns:\n  random:\n    seed: 1\n    n: {n}\n    {dist}\n",
+    )
+    # lines: scene 1, runs 2, random 3, seed 4, n 5, the key and its distribution 6
+    status = main(["sweep", str(sweep)])
+    err = capsys.readouterr().err
+    assert status == 2 and err.count("\n") == 1
+    assert f"{sweep}:{line}: {key}" in err, err
+
+
+def test_a_missing_scene_file_exits_2_naming_the_sweep_line(tmp_path, capsys):
+    sweep = _write(tmp_path, "runs:\n  grid:\n    world.dt: [0.01]\nscene: nowhere.yaml\n")
+    status = main(["sweep", str(sweep)])
+    err = capsys.readouterr().err
+    assert status == 2 and f"{sweep}:4: scene: no such file" in err, err
+
+
+def test_a_remote_scheduler_needs_an_absolute_output_folder(tmp_path, capsys):
+    sweep = _write(
+        tmp_path, f"scene: {SCENES / 'bounce.yaml'}\nruns:\n  grid:\n    world.dt: [0.01]\n"
+    )
+    status = main(["sweep", str(sweep), "--out", "rel/out", "--scheduler", "tcp://127.0.0.1:1"])
+    err = capsys.readouterr().err
+    assert status == 2 and "absolute path" in err
+
+
+def test_random_draws_depend_on_seed_sample_and_key_alone(tmp_path):
+    text = """\
+        scene: {scene}
+        runs:
+          random:
+            n: 5
+            seed: 11
+            {a}
+            {b}
+        record: none
+        """
+    a = "bodies.box.velocity.x: {uniform: [-5.0, 5.0]}"
+    b = "bodies.box.restitution: {integers: [0, 1]}"
+    s1 = load_sweep(_write(tmp_path, text.format(scene=SCENES / "bounce.yaml", a=a, b=b), "1.yaml"))
+    s2 = load_sweep(_write(tmp_path, text.format(scene=SCENES / "bounce.yaml", a=b, b=a), "2.yaml"))
+    for i in range(5):
+        assert s1.params(i) == s2.params(i)
+        rng = np.random.Generator(
+            np.random.PCG64(
+                np.random.SeedSequence(
+                    [
+                        11,
+                        i,
+                        *np.frombuffer(
+                            hashlib.sha256(b"bodies.box.velocity.x").digest()[:16], "<u4"
+                        ).tolist(),
+                    ]
+                )
+            )
+        )
+        assert s1.params(i)["bodies.box.velocity.x"] == rng.uniform(-5.0, 5.0)
+    # every run's scene loads, and holds the drawn value
+    check_runs(s1)
+    from isaac.scene import load_scene_text
+
+    run3 = load_scene_text(s1.run_scene_text(3))
+    assert run3.bodies[1].velocity == (s1.params(3)["bodies.box.velocity.x"], 0.0)
+
+
+@pytest.mark.slow
+def test_no_jit_sweep_runs_and_records(tmp_path):
+    sweep = _write(
+        tmp_path,
+        f"""\
+        scene: {SCENES / "bounce.yaml"}
+        runs:
+          grid:
+            bodies.box.restitution: [0.3, 0.6]
+        steps: 5
+        record: mcap
+        """,
+    )
+    env = dict(os.environ, NUMBA_DISABLE_JIT="1")
+    done = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "isaac",
+            "sweep",
+            str(sweep),
+            "--out",
+            str(tmp_path / "o"),
+            "--workers",
+            "1",
+        ],
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
+    assert done.returncode == 0, done.stderr
+    rows = pq.read_table(tmp_path / "o" / "runs.parquet").to_pylist()
+    assert [r["status"] for r in rows] == ["ok", "ok"]
+    assert all((tmp_path / "o" / r["log_path"]).stat().st_size > 0 for r in rows)
+
+
+def _children(pid: int) -> list[int]:
+    out = []
+    for entry in os.listdir("/proc"):
+        if entry.isdigit():
+            try:
+                stat = Path(f"/proc/{entry}/stat").read_text()
+            except OSError:
+                continue
+            if int(stat.rsplit(")", 1)[1].split()[1]) == pid:
+                out.append(int(entry))
+    return out
+
+
+@pytest.mark.slow
+def test_ctrl_c_stops_cleanly_and_the_same_command_resumes(tmp_path, cluster):
+    sweep = _write(
+        tmp_path, BOUNCE_SWEEP.format(scene=SCENES / "bounce.yaml", steps=300, record="mcap")
+    )
+    out = tmp_path / "out"
+    cmd = [
+        sys.executable,
+        "-m",
+        "isaac",
+        "sweep",
+        str(sweep),
+        "--out",
+        str(out),
+        "--workers",
+        "2",
+        "--chunk",
+        "1",
+    ]
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    rows = out / "rows"
+    deadline = time.monotonic() + 300
+    while time.monotonic() < deadline and not (
+        rows.is_dir() and len(list(rows.glob("*.json"))) >= 3
+    ):
+        time.sleep(0.2)
+    workers = _children(proc.pid)
+    assert workers
+    proc.send_signal(signal.SIGINT)
+    _, err = proc.communicate(timeout=120)
+    assert proc.returncode == 130, err
+    assert "Traceback" not in err and "run the same command again to resume" in err
+    time.sleep(1)
+    assert [p for p in workers if os.path.exists(f"/proc/{p}")] == []
+    # every log under its final name is a finished run's (its row names its sha256)
+    table = pq.read_table(out / "runs.parquet").to_pylist()
+    assert 3 <= len(table) < 40
+    finals = {p.name for p in (out / "logs").glob("run-*.mcap")}
+    named = {os.path.basename(r["log_path"]) for r in table}
+    assert finals <= named | {p.name for p in (out / "logs").glob("*.partial")}
+    resumed = subprocess.run(cmd, capture_output=True, text=True, timeout=600)
+    assert resumed.returncode == 0, resumed.stderr
+    _, client = cluster
+    whole = execute(str(sweep), str(tmp_path / "whole"), client=client, plots=False)
+    assert _comparable(pq.read_table(out / "runs.parquet")) == _comparable(whole.table)
+    assert _log_bytes(str(out)) == _log_bytes(whole.out)
+
+
+@pytest.mark.slow
+def test_a_killed_worker_costs_only_its_run(tmp_path, cluster):
+    c, client = cluster
+    sweep = _write(
+        tmp_path, BOUNCE_SWEEP.format(scene=SCENES / "bounce.yaml", steps=300, record="mcap")
+    )
+    out = tmp_path / "out"
+    import threading
+
+    result = {}
+    thread = threading.Thread(
+        target=lambda: result.update(
+            r=execute(str(sweep), str(out), client=client, chunk=10, plots=False)
+        )
+    )
+    thread.start()
+    rows = out / "rows"
+    deadline = time.monotonic() + 300
+    while time.monotonic() < deadline and not (
+        rows.is_dir() and len(list(rows.glob("*.json"))) >= 2
+    ):
+        time.sleep(0.1)
+    pids = client.run(os.getpid)
+    victim = sorted(pids.values())[0]
+    os.kill(victim, signal.SIGKILL)
+    thread.join(timeout=600)
+    table = result["r"].table
+    assert table.column("index").to_pylist() == list(range(40))
+    assert all(s == "ok" for s in table.column("status").to_pylist())
+    whole = execute(str(sweep), str(tmp_path / "whole"), client=client, plots=False)
+    assert _comparable(table) == _comparable(whole.table)
+    assert _log_bytes(str(out)) == _log_bytes(whole.out)
+    assert not list((out / "logs").glob("*.partial"))
