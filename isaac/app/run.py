@@ -7,6 +7,7 @@ import os
 import signal
 import sys
 import time
+from itertools import chain
 
 from isaac.errors import IsaacError, LogError, SimulationError
 from isaac.scene import load_scene
@@ -137,7 +138,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     _warn("run", scene, steps)
     claims = _claim_outputs(args)
     try:
-        sim = Simulation(scene)
+        sim = Simulation(scene, staged=args.profile)  # --profile times the staged stages
     except BaseException:
         for c in claims.values():
             c.release(discard=True)
@@ -172,22 +173,29 @@ def cmd_run(args: argparse.Namespace) -> int:
 
             progress = tqdm(total=steps, unit="step", desc=scene.name, leave=False)
         loop_start = time.perf_counter()
-        for _ in range(steps):
-            if stop.signal is not None:
-                name = signal.Signals(stop.signal).name
-                stopped = ("interrupted", f"{name} after step {sim.step_index}")
-                break
-            last = sim.step()
+        # whole batches of steps per compiled call (`Simulation.batches`); a stop request is
+        # acted on between batches, which are small enough to keep that prompt
+        size = batch_size(sim.n_bodies)
+        # (the first step alone: it also loads or compiles the kernels, and the rate is
+        # measured after it)
+        batches = chain(sim.batches(min(1, steps), size=1), sim.batches(steps - 1, size=size))
+        for batch in batches:
             if first_step_at is None:
                 first_step_at = time.perf_counter()
-            if recorder:
-                recorder.write(last)
-            n = len(last.contacts)
-            if n:
-                contacts_seen += n
-                max_depth = max(max_depth, float(last.contacts.depth.max()))
+            for s in range(batch.steps):
+                last = batch.record(s)
+                if recorder:
+                    recorder.write(last)
+            depth = batch.all_contacts().depth
+            if len(depth):
+                contacts_seen += len(depth)
+                max_depth = max(max_depth, float(depth.max()))
             if progress:
-                progress.update(1)
+                progress.update(batch.steps)
+            if stop.signal is not None and sim.step_index < first.step + steps:
+                name = signal.Signals(stop.signal).name
+                stopped = ("interrupted", f"interrupted by {name}")
+                break
         finished = stopped is None
     except SimulationError as exc:
         stopped = ("error", str(exc))
@@ -203,7 +211,8 @@ def cmd_run(args: argparse.Namespace) -> int:
                     recorder.close(complete=True)
                 else:
                     reason = stopped[1] if stopped else "the run failed"
-                    recorder.close(complete=False, stopped_at=sim.step_index, reason=reason)
+                    # the last step handed to the recorder: "stopped at" as the summary says it
+                    recorder.close(complete=False, stopped_at=last.step, reason=reason)
                 if stopped is None:  # a signal the loop did not act on: during the close
                     signal_in_close = stop.signal
         finally:
@@ -217,9 +226,17 @@ def cmd_run(args: argparse.Namespace) -> int:
     elapsed = loop_end - (first_step_at or loop_start)
     rate = timed_steps / elapsed if timed_steps > 0 and elapsed > 0 else 0.0
     energy_end = _energy(sim, last)
+    # "stopped at step K" means one thing everywhere (run, inspect, recover): K is the last step
+    # whose state the run completed and, with files, the last step in them
+    files = " and ".join(out for out in (args.mcap, args.rrd) if out)
+    where = f"the last step in {files}" if files else "the last step simulated"
+    stopped_at = f"stopped at step {last.step}, {where}"
+    ran = f"{taken} steps"
+    if stopped is not None:  # the error itself is the last line, on stderr
+        ran = f"{'failed' if stopped[0] == 'error' else stopped[1]}: {taken} of {steps} steps"
     print(
-        f"scene {scene.name!r}: {taken} steps of {scene.world.dt} s, {sim.n_bodies} bodies, "
-        f"fidelity {scene.world.fidelity}"
+        f"scene {scene.name!r}: {ran} of {scene.world.dt} s, {sim.n_bodies} bodies, "
+        f"fidelity {scene.world.fidelity}" + ("" if stopped is None else f"; {stopped_at}")
     )
     print(
         f"  contacts seen {contacts_seen}, max depth {max_depth:.6g} m, "
@@ -256,12 +273,17 @@ def cmd_run(args: argparse.Namespace) -> int:
     if stopped:
         kind, message = stopped
         print(
-            f"isaac run: {'error: ' if kind == 'error' else ''}{message}; "
-            f"stopped at step {sim.step_index}, the steps before it are recorded",
+            f"isaac run: {'error: ' if kind == 'error' else ''}{message}; {stopped_at}",
             file=sys.stderr,
         )
         return 3 if kind == "error" else 130
     return 0
+
+
+def batch_size(n_bodies: int) -> int:
+    """Steps per compiled call of a run: 64 for small scenes, fewer as they grow (about 4,096
+    body-steps a batch), so that a stop request waits for at most a few steps of a large scene."""
+    return max(1, min(64, 4096 // max(1, n_bodies)))
 
 
 def _energy(sim, record) -> float:

@@ -162,6 +162,11 @@ class StepBatch:
         lo, hi = int(self.offsets[s]), int(self.offsets[s + 1])
         return Contacts(*(a[lo:hi] for a in self._rows))
 
+    def all_contacts(self) -> Contacts:
+        """The contact rows of every step of the batch, in step order (views)."""
+        lo, hi = int(self.offsets[0]), int(self.offsets[-1])
+        return Contacts(*(a[lo:hi] for a in self._rows))
+
     def record(self, s: int) -> StepRecord:
         """Step s as a `StepRecord` whose arrays are views of this batch, made when first read
         (a record of a 2-body step cost 5 us made eagerly, more than the step)."""
