@@ -557,12 +557,16 @@ def recover(src: str, dst: str) -> Recovered:
                     )
             count = _copy_steps(src, writer, first, last)
             end = reader.end if (lost is None and reader.end is not None) else None
+            if end is not None and end.get("complete") != "true" and not end.get("stopped_at"):
+                # a writer that outlived its run noted no step: "stopped at" is the last step
+                # in the log, as everywhere (isaac inspect, isaac run)
+                end = {**end, "stopped_at": "" if last is None else str(last)}
             if end is None:
                 end = end_metadata(
                     complete=False,
                     steps=count,
                     last_step=last,
-                    stopped_at=last + 1,
+                    stopped_at=last,
                     reason="recovered from a log that was not closed"
                     if lost is None or not log.closed_cleanly
                     else f"recovered from a damaged log: {lost}",

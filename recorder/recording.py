@@ -272,8 +272,10 @@ class Recorder:
     ) -> dict[str, str]:
         """Finish both files cleanly (keeping every step written) and rename them.
 
-        complete: False when the run was interrupted or failed; then ``stopped_at`` (default: the
-            last recorded step) and ``reason`` are written into the log.
+        complete: False when the run was interrupted or failed; then ``stopped_at`` and
+            ``reason`` are written into the log. stopped_at: the last step whose state is in the
+            log, the meaning `isaac run`, `inspect` and `recover` give "stopped at step K"
+            (default: the last recorded step).
         Returns {"mcap": path, "rrd": path} for the files written.
         With ``ISAAC_TEST_CLOSE_GATE`` set (tests only), first waits on that FIFO.
         """
@@ -330,7 +332,8 @@ class Recorder:
         elif issubclass(exc_type, KeyboardInterrupt):
             self.close(complete=False, reason="interrupted")
         elif issubclass(exc_type, IsaacError):
-            self.close(complete=False, stopped_at=getattr(exc, "step", None), reason=str(exc))
+            # stopped at the last step recorded (a SimulationError's `step` failed: not in it)
+            self.close(complete=False, reason=str(exc))
         else:
             self.close(complete=False, reason=f"{exc_type.__name__}: {exc}")
         return False

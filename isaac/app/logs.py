@@ -139,17 +139,19 @@ def _inspect(args: argparse.Namespace) -> int:
         print(f"damaged: from {damage.at()}: {damage}")
     last = s.last_step if s.steps else "none"
     recover_hint = f"`isaac recover {args.log} OUT.mcap` writes a clean copy"
+    # "stopped at step K": K is the last step whose state is in the log, as `isaac run` and
+    # `isaac recover` say it
+    stopped_at = f"stopped at step {last}, the last step in the log" if s.steps else "no step"
     if damage is not None and log.closed_cleanly:
         state = f"closed, but damaged (above); readable up to step {last}; {recover_hint}"
     elif log.closed_cleanly and end is not None:
         if end.get("complete") == "true":
             state = "closed cleanly; run complete"
         else:
-            state = f"closed cleanly; run stopped at step {end.get('stopped_at') or '?'}" + (
-                f": {end['reason']}" if end.get("reason") else ""
-            )
+            reason = end.get("reason") or "the run did not complete"
+            state = f"closed cleanly; {_run_did(reason)}; {stopped_at}"
     else:
-        state = f"NOT closed (unfinished or damaged); readable up to step {last}; {recover_hint}"
+        state = f"NOT closed (unfinished or damaged); {stopped_at}; {recover_hint}"
     print(f"file     {state}")
     return 0
 
@@ -299,6 +301,14 @@ def _print_step_json(logged, names, keep) -> int:
     return 0
 
 
+def _run_did(reason: str) -> str:
+    """What the log's end record says of its run, for `inspect`: "run interrupted by SIGINT",
+    "run did not complete: step 58: body ..."."""
+    if reason.startswith("interrupted"):
+        return f"run {reason}"
+    return f"run did not complete: {reason}"
+
+
 def cmd_recover(args: argparse.Namespace) -> int:
     from recorder.reader import recover
 
@@ -307,9 +317,8 @@ def cmd_recover(args: argparse.Namespace) -> int:
     done = recover(args.log, args.out)
     kept, last, lost = done.kept, done.last, done.lost
     print(
-        f"recovered {kept} step(s)"
-        + ("" if last is None else f" (up to step {last})")
-        + f" into {args.out}"
+        f"recovered {kept} step(s) into {args.out}"
+        + ("" if last is None else f": stopped at step {last}, the last step in the log")
     )
     if lost:
         print(f"could not salvage: {lost}")

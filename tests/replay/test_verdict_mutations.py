@@ -324,7 +324,9 @@ def test_inspect_and_recover_report_the_same_damage(clean, tmp_path, capsys):
     assert "steps    30 of the 51 the log claims (step 0 to 29" in out
     fixed = tmp_path / "fixed.mcap"
     status, out, _ = isaac(capsys, "recover", bad, fixed)
-    assert status == 0 and out.startswith("recovered 30 step(s) (up to step 29)")
+    assert status == 0 and out.startswith(
+        f"recovered 30 step(s) into {fixed}: stopped at step 29, the last step in the log"
+    )
     assert "could not salvage: step 30 and after: a chunk whose CRC" in out
     assert "21 of the 51 steps it claims" in out
     # what was recovered is a whole log of its own: it claims the 30 steps it holds
