@@ -443,6 +443,13 @@ def test_no_jit_sweep_runs_and_records(tmp_path):
     assert all((tmp_path / "o" / r["log_path"]).stat().st_size > 0 for r in rows)
 
 
+def _alive(pid: int) -> bool:
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] != "Z"
+    except OSError:
+        return False
+
+
 def _children(pid: int) -> list[int]:
     out = []
     for entry in os.listdir("/proc"):
@@ -488,8 +495,12 @@ def test_ctrl_c_stops_cleanly_and_the_same_command_resumes(tmp_path, cluster):
     _, err = proc.communicate(timeout=120)
     assert proc.returncode == 130, err
     assert "Traceback" not in err and "run the same command again to resume" in err
-    time.sleep(1)
-    assert [p for p in workers if os.path.exists(f"/proc/{p}")] == []
+    # the workers and multiprocessing's resource tracker end with the sweep (the tracker a
+    # moment after: it waits for its pipe to close)
+    deadline = time.monotonic() + 15
+    while time.monotonic() < deadline and [p for p in workers if _alive(p)]:
+        time.sleep(0.2)
+    assert [p for p in workers if _alive(p)] == []
     # every log under its final name is a finished run's (its row names its sha256)
     table = pq.read_table(out / "runs.parquet").to_pylist()
     assert 3 <= len(table) < 40

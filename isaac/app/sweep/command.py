@@ -25,6 +25,7 @@ import os
 import shutil
 import signal
 import sys
+import threading
 import time
 from dataclasses import dataclass
 
@@ -253,6 +254,10 @@ def execute(
         interrupted, n_workers = _fan_out(
             sweep, todo, out, done, worlds, client, scheduler, workers, chunk, progress
         )
+    if interrupted:
+        # runs that finished after the client stopped listening left their rows on disk
+        for i, row in results.kept_rows(out, sweep.n_runs, schema).items():
+            done.setdefault(i, row)
     table = results.to_table(list(done.values()), schema)
     results.write(table, out)
     written = None
@@ -334,8 +339,9 @@ def _fan_out(sweep, todo, out, done, worlds, client, scheduler, workers, chunk, 
     except KeyboardInterrupt:
         interrupted = True
     finally:
-        # a second Ctrl-C must not cut the shutdown short
-        previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+        # a second Ctrl-C must not cut the shutdown short (signals: main thread only)
+        main_thread = threading.current_thread() is threading.main_thread()
+        previous = signal.signal(signal.SIGINT, signal.SIG_IGN) if main_thread else None
         try:
             if bar is not None:
                 bar.close()
@@ -346,7 +352,8 @@ def _fan_out(sweep, todo, out, done, worlds, client, scheduler, workers, chunk, 
             if cluster is not None:
                 cluster.close()
         finally:
-            signal.signal(signal.SIGINT, previous)
+            if main_thread:
+                signal.signal(signal.SIGINT, previous)
     return interrupted, n_workers
 
 
