@@ -557,3 +557,49 @@ def pack_rerun(
         ),
     )
     return bad
+
+
+# -- a batch of MCAP frames in one call --------------------------------------------------------
+@numba.njit(cache=True, nogil=True)
+def frame_sizes_of(first, n, offsets, head_bytes):
+    """Each step's (Bodies bytes, Contacts bytes, frame bytes) for a `StepBatch` whose first
+    record is step `first` (offsets: its row offsets), as `recorder.frames.frame_sizes` gives
+    them one at a time: a (steps, 3) int64 array."""
+    steps = offsets.shape[0] - 1
+    out = np.empty((steps, 3), dtype=np.int64)
+    for s in range(steps):
+        bodies, contacts = message_sizes(first + s, n, offsets[s + 1] - offsets[s])
+        out[s, 0] = bodies
+        out[s, 1] = contacts
+        out[s, 2] = head_bytes + ((bodies + 7) & ~7) + ((contacts + 7) & ~7)
+    return out
+
+
+@numba.njit(cache=True, nogil=True)
+def pack_frames(
+    buf, pos, lo, hi, first, dt, sizes, offsets, position, angle, velocity, angular_velocity,
+    exists, substep, a, b, feature, slot, point, normal, depth, push_a, push_b, impulse,
+    tangent_impulse, restitution, mass, inertia, concrete, gx, gy,
+):  # fmt: skip
+    """Steps lo .. hi - 1 of a batch (the arrays of `isaac.engine.driver.Batch`; step s is
+    state index first + s at time (first + s) * dt s, as `StepBatch.record` computes it) as
+    consecutive `pack_frame` frames from byte `pos` of `buf`, frame sizes from
+    `frame_sizes_of`. Returns the first step holding a NaN or an infinity (its frame and the
+    ones after it unwritten), or hi."""
+    n = angle.shape[1]
+    at = pos
+    for s in range(lo, hi):
+        r0 = offsets[s]
+        r1 = offsets[s + 1]
+        step = first + s
+        bad, _, _ = pack_frame(
+            buf, at, step, step * dt, n, r1 - r0, (sizes[s, 0] + 7) & ~7, position[s], angle[s],
+            velocity[s], angular_velocity[s], exists[s], substep[r0:r1], a[r0:r1], b[r0:r1],
+            feature[r0:r1], slot[r0:r1], point[r0:r1], normal[r0:r1], depth[r0:r1],
+            push_a[r0:r1], push_b[r0:r1], impulse[r0:r1], tangent_impulse[r0:r1],
+            restitution[r0:r1], mass, inertia, concrete, gx, gy,
+        )  # fmt: skip
+        if bad >= 0:
+            return s
+        at += sizes[s, 2]
+    return hi

@@ -267,6 +267,32 @@ class Recorder:
         self.steps_written += 1
         self.last_step = record.step
 
+    def write_batch(self, batch) -> None:
+        """Record the steps of an `isaac.engine.records.StepBatch` (`Simulation.batches`), in
+        order after the steps written so far. Writer processes take the MCAP frames of a whole
+        batch from one compiled call (`WriterProcess.write_batch`); other writers take its
+        records one by one. A NaN or infinity raises SimulationError as `write` does, with every
+        step before it recorded."""
+        if self.closed:
+            raise LogError("the recorder is closed")
+        writers = [w for w in (self.mcap, self.rerun) if w is not None]
+        if not writers or not all(hasattr(w, "write_batch") for w in writers):
+            for s in range(batch.steps):
+                self.write(batch.record(s))
+            return
+        sent = [w.write_batch(batch) for w in writers]
+        good = min(sent)
+        if good:
+            self.steps_written += good
+            self.last_step = batch.first + good - 1
+        if good < batch.steps:
+            # the step a writer found a NaN or infinity in: named by the same check as write()
+            record = batch.record(good)
+            check_finite(self.model.names, record)
+            raise SimulationError(
+                f"step {record.step}: a recorded value is not finite", step=record.step
+            )
+
     def close(
         self, complete: bool = True, stopped_at: int | None = None, reason: str | None = None
     ) -> dict[str, str]:

@@ -267,6 +267,54 @@ class WriterProcess:
         self._announce(pos, size, end)
         return True
 
+    def write_batch(self, batch) -> int:
+        """Hand the steps of a `isaac.engine.records.StepBatch` to the child, their MCAP frames
+        packed by one compiled call per stretch of the ring (`recorder.pack.pack_frames`) rather
+        than one call per step. Returns how many steps were sent: all of them, or the steps
+        before the first one holding a NaN or an infinity (the caller says which)."""
+        if self.kind == "rerun" or not self._compiled:
+            for s in range(batch.steps):
+                if not self.write(batch.record(s)):
+                    return s
+            return batch.steps
+        from recorder.pack import HEAD_BYTES, frame_sizes_of, pack_frames
+
+        sizes = frame_sizes_of(batch.first, batch.angle.shape[1], batch.offsets, HEAD_BYTES)
+        ends = np.cumsum(sizes[:, 2])
+        model = self._stats_model
+        lo = 0
+        while lo < batch.steps:
+            if sizes[lo, 2] > self.capacity:  # too large for the ring: the one-step path
+                if not self.write(batch.record(lo)):
+                    return lo
+                lo += 1
+                continue
+            # the frames from lo that fit in a quarter of the ring, laid end to end
+            base = ends[lo - 1] if lo else 0
+            hi = lo + max(1, int(np.searchsorted(ends[lo:] - base, self.capacity // 4, "right")))
+            hi = min(hi, batch.steps)
+            while hi > lo + 1 and sizes[hi - 1, 2] > self.capacity:
+                hi -= 1
+            total = int(ends[hi - 1] - base)
+            pos, end = self._reserve(total)
+            done = pack_frames(
+                self._ring_u8, pos, lo, hi, batch.first, batch.dt, sizes, batch.offsets,
+                batch.position, batch.angle, batch.velocity, batch.angular_velocity,
+                batch.exists, *batch.row_arrays, model.mass, model.inertia, model.concrete,
+                *self._gravity,
+            )  # fmt: skip
+            at, head = pos, end - total
+            for s in range(lo, done):
+                size = int(sizes[s, 2])
+                head += size
+                self._announce(at, size, head)
+                at += size
+            if done < hi:
+                return done
+            self.head = end
+            lo = hi
+        return batch.steps
+
     def _reserve(self, size: int) -> tuple[int, int]:
         """Where the next frame of ``size`` bytes goes: its offset in the ring and its end in
         bytes handed out; waits while the child still holds that part of the ring."""

@@ -182,10 +182,9 @@ def cmd_run(args: argparse.Namespace) -> int:
         for batch in batches:
             if first_step_at is None:
                 first_step_at = time.perf_counter()
-            for s in range(batch.steps):
-                last = batch.record(s)
-                if recorder:
-                    recorder.write(last)
+            if recorder:
+                recorder.write_batch(batch)
+            last = batch.record(batch.steps - 1)
             depth = batch.all_contacts().depth
             if len(depth):
                 contacts_seen += len(depth)

@@ -162,6 +162,13 @@ class StepBatch:
         lo, hi = int(self.offsets[s]), int(self.offsets[s + 1])
         return Contacts(*(a[lo:hi] for a in self._rows))
 
+    @property
+    def row_arrays(self) -> tuple:
+        """The row arrays as the driver wrote them (`CONTACT_FIELDS` order); only rows
+        offsets[0] .. offsets[-1] are the batch's (what a compiled consumer indexes with the
+        offsets)."""
+        return self._rows
+
     def all_contacts(self) -> Contacts:
         """The contact rows of every step of the batch, in step order (views)."""
         lo, hi = int(self.offsets[0]), int(self.offsets[-1])
