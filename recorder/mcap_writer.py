@@ -82,8 +82,11 @@ def _versions() -> dict[str, str]:
             engine = version("isaac-physics")
         except Exception:  # noqa: BLE001 - not installed as a distribution
             engine = "unknown"
+    from isaac.engine import PHYSICS_VERSION
+
     return {
         "engine_version": str(engine),
+        "physics_version": str(PHYSICS_VERSION),
         "python_version": platform.python_version(),
         "python_implementation": platform.python_implementation(),
         "numpy_version": numpy.__version__,

@@ -31,6 +31,7 @@ from dataclasses import asdict, fields
 
 import numpy as np
 
+from isaac.engine import PHYSICS_VERSION
 from isaac.engine.records import StepRecord
 from isaac.errors import LogError, SimulationError
 from isaac.scene import Scene, load_scene_text
@@ -61,14 +62,40 @@ VERSION_KEYS = (
 )
 SUGGESTED_TOLERANCE = 1e-9
 
+
+class PhysicsVersionDiffers(LogError):
+    """The log was recorded by another physics version (CHANGELOG.md): a bit-for-bit replay
+    cannot match, so it is refused before anything is simulated (exit status 1, not 2: the file
+    is fine, the verdict is that it does not replay)."""
+
+    exit_status = 1
+
+
+def physics_version(metadata: dict) -> str:
+    """The physics version a log's metadata records ("1" for logs from before it was recorded)."""
+    return metadata.get("physics_version") or "1"
+
+
+def physics_note(logged: dict, here: dict, *, what: str = "here") -> str | None:
+    """One line when the physics versions differ (None when they agree)."""
+    a, b = physics_version(logged), physics_version(here)
+    if a == b:
+        return None
+    return f"physics version {a} in the log, {b} {what} (CHANGELOG.md lists what changed)"
+
+
 _CHANNEL_ORDER = ("/world", "/contacts", "/bodies", "/stats")
 
 
 def versions_note(
-    logged: dict, here: dict, *, what: str = "here", suggest: bool = True
+    logged: dict, here: dict, *, what: str = "here", suggest: bool = True, physics: bool = True
 ) -> str | None:
-    """A note when the versions or the machine differ (None when they all agree)."""
+    """A note when the versions or the machine differ (None when they all agree); the physics
+    version among them unless ``physics`` is False (a replay says it on its own line)."""
     diffs = []
+    a, b = physics_version(logged), physics_version(here)
+    if physics and a != b:
+        diffs.append(f"physics {a} in the log, {b} {what}")
     for key in VERSION_KEYS:
         a, b = logged.get(key), here.get(key)
         if a != b:
@@ -345,7 +372,18 @@ def replay_log(
     if to_step is not None and from_step is not None and to_step < from_step:
         raise LogError(f"--to-step {to_step} is before --from-step {from_step}")
     log = RawLog(path)
+    # before anything is simulated or compiled: a log of another physics version never matches
+    physics = physics_note(
+        log.metadata, {"physics_version": str(PHYSICS_VERSION)}, what="in this engine"
+    )
+    if physics and tolerance is None:
+        raise PhysicsVersionDiffers(
+            f"{path}: not replayed: {physics}; results differ on purpose, so a bit-for-bit "
+            f"replay cannot match (--tolerance X compares within X * (1 + |value|))"
+        )
     scene, notes = load_embedded_scene(log)
+    if physics:
+        notes.insert(0, f"{physics}; compared within --tolerance {tolerance:g}")
     sim = Simulation(scene)
     model = sim.model
     names = list(model.names)
@@ -354,7 +392,7 @@ def replay_log(
     report = Report(mode="replay", logs=[str(path)], tolerance=tolerance, max_reported=max_reported)
     report.notes.extend(notes)
     here = build_metadata(scene, "", len(names))
-    note = versions_note(log.metadata, here, suggest=tolerance is None)
+    note = versions_note(log.metadata, here, suggest=tolerance is None, physics=False)
     if note:
         report.notes.append(note)
     if log.metadata.get("bodies") not in (None, str(len(names))):

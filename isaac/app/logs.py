@@ -107,7 +107,9 @@ def _inspect(args: argparse.Namespace) -> int:
         f"scene    {meta.get('scene_name', '?')} (sha256 {meta.get('scene_sha256', '?')[:16]}...)"
     )
     print(
-        f"versions isaac {meta.get('engine_version')}, Python {meta.get('python_version')}, "
+        f"versions isaac {meta.get('engine_version')}, "
+        f"physics {meta.get('physics_version') or '1 (not recorded)'}, "
+        f"Python {meta.get('python_version')}, "
         f"numpy {meta.get('numpy_version')}, numba {meta.get('numba_version')}"
     )
     print(f"machine  {meta.get('platform')} ({meta.get('cpu')})")

@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import math
-
 import numba
 import numpy as np
 
@@ -29,8 +27,7 @@ def transform(
     for i in range(n):
         if not exists[i]:
             continue
-        c = math.cos(angle[i])
-        s = math.sin(angle[i])
+        s, c = sin_cos(angle[i])
         px = position[i, 0]
         py = position[i, 1]
         lo_x = np.inf

@@ -19,6 +19,7 @@ sum of dt: a body takes part in a step when it exists at the step's start.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -65,7 +66,9 @@ class StepSettings:
     @staticmethod
     def of(world: WorldSettings) -> StepSettings:
         h = world.dt / world.substeps
-        g = float(np.hypot(world.gravity[0], world.gravity[1]))
+        # determinism: sqrt of written-out products (IEEE exact rounding), not libm's hypot
+        gx, gy = float(world.gravity[0]), float(world.gravity[1])
+        g = math.sqrt(gx * gx + gy * gy)
         speculative = world.ccd == "speculative"
         return StepSettings(
             gx=float(world.gravity[0]),

@@ -22,6 +22,7 @@ import math
 
 import numpy as np
 
+from isaac import trig
 from isaac.scene.polygon import box_vertices, mass_properties
 from isaac.scene.spec import BodySpec
 
@@ -225,12 +226,14 @@ def pile(
         local = np.empty((n, 2), dtype=np.float64)
         for k in range(n):
             a = phase + 2.0 * math.pi * (float(steps[k]) - float(gaps[0])) / float(steps[-1])
-            local[k, 0] = r * math.cos(a)
-            local[k, 1] = r * math.sin(a)
+            # determinism: isaac.trig, the same bits on every machine (libm's are not)
+            sa, ca = trig.sin_cos(a)
+            local[k, 0] = r * ca
+            local[k, 1] = r * sa
         # the engine puts the centroid at `position`; place it so the circumcircle's centre (the
         # local origin), rotated by `angle`, lands on the cell's centre.
         centroid = mass_properties(local)[1]
-        c, s = math.cos(angle), math.sin(angle)
+        s, c = trig.sin_cos(angle)
         cell_x = left + (i % columns + 0.5) * cell
         cell_y = y0 + (i // columns + 0.5) * cell
         pos = (

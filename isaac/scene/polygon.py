@@ -23,6 +23,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from isaac import trig
 from isaac.scene.limits import MAX_VERTICES
 
 DUPLICATE_TOLERANCE = 1e-9  # x L: vertices this close are the same vertex
@@ -40,12 +41,14 @@ def box_vertices(width: float, height: float) -> np.ndarray:
 def regular_vertices(sides: int, radius: float, phase: float = 0.0) -> np.ndarray:
     """(sides, 2) vertices (m) of a regular polygon of circumradius `radius` (m) centred at the
     origin, counter-clockwise; vertex k is at angle ``phase + 2*pi*k/sides`` (rad, CCW from +x)."""
-    # determinism: math.cos/sin (not a vectorised call) so the bits do not depend on SIMD paths.
+    # determinism: isaac.trig (IEEE basic operations only), not libm or a vectorised call, so the
+    # vertices have the same bits on every machine; the log embeds them expanded all the same.
     out = np.empty((sides, 2), dtype=np.float64)
     for k in range(sides):
         a = phase + 2.0 * math.pi * k / sides
-        out[k, 0] = radius * math.cos(a)
-        out[k, 1] = radius * math.sin(a)
+        s, c = trig.sin_cos(a)
+        out[k, 0] = radius * c
+        out[k, 1] = radius * s
     return out
 
 
