@@ -3,9 +3,9 @@
 Usage (the run loop in isaac/app/run.py)::
 
     with Recorder(sim, mcap_path="out.mcap", rrd_path="out.rrd") as rec:
-        rec.write(sim.record())          # step 0: the initial state
-        for _ in range(steps):
-            rec.write(sim.step())
+        # a fresh simulation's step 0 (the initial state) is written by the recorder itself
+        for record in sim.run(steps):
+            rec.write(record)
     # or explicitly: rec.close(complete=False, stopped_at=k, reason="interrupted")
 
 Every record is checked for NaN / infinity before anything is written: a bad value raises
@@ -21,6 +21,8 @@ from __future__ import annotations
 
 import os
 
+import numpy as np
+
 from isaac.engine.records import StepRecord
 from isaac.errors import IsaacError, LogError, SimulationError
 from isaac.tuning import reuse_large_buffers
@@ -35,7 +37,11 @@ CLOSE_GATE_ENV = "ISAAC_TEST_CLOSE_GATE"
 class Recorder:
     """Records a `Simulation` run to MCAP (``mcap_path``) and/or Rerun (``rrd_path``).
 
-    sim: the simulation (``.scene``, ``.model``); only read, never stepped here.
+    sim: the simulation (``.scene``, ``.model``); only read, never stepped here. Given a fresh
+        one (at step 0, nothing stepped), the recorder writes its step 0 (``sim.record()``)
+        itself, so the log starts at the initial state; writing that step 0 again, as callers
+        of earlier versions did, is a no-op. Given one at a later step, the first step written
+        is the caller's.
     mcap_path, rrd_path: output files (None to skip); written as ``PATH.partial`` until closed.
         Either may be an `recorder.outputs.OutputClaim` made beforehand (the recorder then owns
         it and releases it on close).
@@ -87,8 +93,12 @@ class Recorder:
                     c.release(discard=True)
             self._release_claims(discard=True)
             raise
+        self._start_record: StepRecord | None = None
         try:
             self._start(sim, scene_text, compression, flush_every, foxglove, impulse_scale, offload)
+            if getattr(sim, "step_index", None) == 0:
+                self._start_record = sim.record()
+                self.write(self._start_record)
         except BaseException:
             self._abandon()
             raise
@@ -247,6 +257,13 @@ class Recorder:
         """Record one step (in order, starting with step 0). Raises SimulationError on NaN/inf."""
         if self.closed:
             raise LogError("the recorder is closed")
+        if self._start_record is not None and self.steps_written == 1 and record.step == 0:
+            if not _same_state(record, self._start_record):
+                raise LogError(
+                    "step 0 is already recorded: the recorder wrote the fresh simulation's "
+                    "initial state itself, and this step 0 differs from it"
+                )
+            return  # the step 0 written at the start, written again: already in the log
         first = self.mcap if self.mcap is not None else self.rerun
         if not getattr(first, "checks_finite", False):
             check_finite(self.model.names, record)
@@ -363,3 +380,11 @@ class Recorder:
         else:
             self.close(complete=False, reason=f"{exc_type.__name__}: {exc}")
         return False
+
+
+def _same_state(a: StepRecord, b: StepRecord) -> bool:
+    """Whether two records hold the same state, bit for bit (NaN equal to NaN)."""
+    fields = ("position", "angle", "velocity", "angular_velocity", "exists")
+    return all(
+        np.array_equal(getattr(a, f), getattr(b, f), equal_nan=f != "exists") for f in fields
+    )

@@ -53,3 +53,15 @@ def test_a_body_view_shows_its_name_and_state():
     assert text.startswith("<BodyView 'crate' (index 1, 1 kg) at step 0:")
     assert "position (0, 3) m" in text and "velocity (1.5, 0) m/s" in text
     assert "concrete" in repr(sim.body("ground"))
+
+
+def test_run_is_a_lazy_generator_and_advance_is_eager():
+    import inspect
+
+    sim = isaac.Simulation(load_scene_text("bodies:\n  - {name: a, shape: {box: [1, 1]}}\n"))
+    steps = sim.run(10)
+    assert inspect.isgenerator(steps) and sim.step_index == 0  # nothing computed yet
+    assert next(steps).step == 1
+    assert sim.step_index == 10  # one batch of up to 64 steps: run ahead of the records taken
+    sim.advance(3)
+    assert sim.step_index == 13  # taken before advance returned

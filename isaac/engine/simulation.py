@@ -157,9 +157,10 @@ class Simulation:
         )
 
     def advance(self, steps: int) -> None:
-        """Advance `steps` steps without making a record of each (the fastest path: one
-        compiled call). `record()` afterwards gives the last state and its step's contacts.
-        Raises SimulationError like `step()`, with the state left before the failing step."""
+        """Advance `steps` steps now, without making a record of each (the fastest path: one
+        compiled call). Eager, unlike `run`: the steps are taken before it returns.
+        `record()` afterwards gives the last state and its step's contacts. Raises
+        SimulationError like `step()`, with the state left before the failing step."""
         if steps <= 0:
             return
         if self._stepper is None:
@@ -232,6 +233,11 @@ class Simulation:
     def run(self, steps: int | None = None, *, batch: int = 64) -> Iterator[StepRecord]:
         """A generator of the records of the next `steps` steps (default: the scene's
         `world.steps`), computed `batch` steps per compiled call.
+
+        Lazy: calling `run(n)` computes nothing; the steps are taken as the generator is
+        iterated (`for record in sim.run(n)`, `list(sim.run(n))`). A `sim.run(n)` that is
+        never iterated leaves the simulation where it was: to advance without records, call
+        `advance(n)`, which takes the steps at once.
 
         The simulation runs ahead of what has been taken from the generator by up to
         `batch - 1` steps: stopping early leaves it past the last record taken. `step()` takes
