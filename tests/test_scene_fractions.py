@@ -10,6 +10,8 @@ from pathlib import Path
 from unittest import mock
 
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from isaac.app.tradeoff.grid import TradeoffError, parse_dt
 from isaac.errors import SceneError
@@ -114,3 +116,25 @@ def test_the_log_embeds_the_fraction_as_written_and_replays_identical(tmp_path):
         [*run, "replay", str(log)], cwd=ROOT, capture_output=True, text=True, timeout=300
     )
     assert done.returncode == 0 and done.stdout.startswith("identical"), done.stdout + done.stderr
+
+
+@settings(max_examples=100, deadline=None)
+@given(
+    st.integers(1, 10**6),
+    st.integers(1, 10**6),
+    st.integers(0, 10**6),
+    st.integers(1, 10**6),
+)
+def test_any_fraction_reads_as_python_divides_and_writes_back_as_written(n, d, e, f):
+    dt = f"{min(n, d)}/{d}"  # in (0, 1]
+    enters = f"{e}/{f}"
+    text = (
+        f"world: {{dt: {dt}}}\nbodies:\n"
+        f"  - {{name: a, shape: {{box: [1, 1]}}, enters_at: {enters}}}\n"
+    )
+    scene = load_scene_text(text)
+    assert scene.world.dt == min(n, d) / d and scene.bodies[0].enters_at == e / f
+    written = scene_to_yaml(scene)
+    assert f"  dt: {dt}\n" in written and f"    enters_at: {enters}\n" in written
+    again = load_scene_text(written)
+    assert again == scene and scene_to_yaml(again) == written
