@@ -138,3 +138,17 @@ def test_any_fraction_reads_as_python_divides_and_writes_back_as_written(n, d, e
     assert f"  dt: {dt}\n" in written and f"    enters_at: {enters}\n" in written
     again = load_scene_text(written)
     assert again == scene and scene_to_yaml(again) == written
+
+
+def test_check_prints_the_time_step_as_written_and_its_value(tmp_path):
+    scene = tmp_path / "frac.yaml"
+    scene.write_text(SCENE)
+    done = subprocess.run(
+        [sys.executable, "-m", "isaac", "check", str(scene)],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert done.returncode == 0, done.stderr
+    assert f"dt 1/120 s ({1 / 120!r}), 40 steps" in done.stdout

@@ -53,9 +53,11 @@ def cmd_check(args: argparse.Namespace) -> int:
     _warn("check", scene)
     concrete = sum(b.concrete for b in scene.bodies)
     w = scene.world
+    written = dict(scene.as_written).get("world.dt")  # `dt: 1/120`, as the scene says it
+    dt = f"{written} s ({w.dt!r})" if written else f"{w.dt} s"
     print(
         f"{args.scene}: ok: scene {scene.name!r}, {len(scene.bodies)} bodies "
-        f"({concrete} concrete), dt {w.dt} s, {w.steps} steps, fidelity {w.fidelity}"
+        f"({concrete} concrete), dt {dt}, {w.steps} steps, fidelity {w.fidelity}"
     )
     return 0
 
