@@ -548,3 +548,46 @@ def test_a_killed_worker_costs_only_its_run(tmp_path, cluster):
     assert _comparable(table) == _comparable(whole.table)
     assert _log_bytes(str(out)) == _log_bytes(whole.out)
     assert not list((out / "logs").glob("*.partial"))
+
+
+def test_verify_replays_every_log_and_names_the_run_and_step_of_a_one_ulp_edit(tmp_path, cluster):
+    sys.path.insert(0, str(ROOT / "tests" / "replay"))
+    from logtools import bodies_with, rewrite
+
+    from isaac.app.sweep.verify import verify
+
+    _, client = cluster
+    sweep = _write(
+        tmp_path,
+        f"""\
+        scene: {SCENES / "bounce.yaml"}
+        runs:
+          grid:
+            bodies.box.velocity.x: [0.0, 0.5, 1.0, 1.5]
+        steps: 20
+        """,
+    )
+    out = tmp_path / "out"
+    execute(str(sweep), str(out), client=client, plots=False)
+    clean = verify(str(out), client=client).to_pylist()
+    assert [r["verdict"] for r in clean] == ["identical"] * 4
+    assert all(r["steps_compared"] > 0 for r in clean)
+
+    def one_ulp(topic, step, data):
+        if topic != "/bodies" or step != 12:
+            return data
+
+        def change(a):
+            a["position"][3] = np.nextafter(a["position"][3], np.inf)  # box's y
+
+        return bodies_with(data, change)
+
+    log = out / "logs" / "run-000002.mcap"
+    rewrite(log, tmp_path / "edited.mcap", message=one_ulp)
+    os.replace(tmp_path / "edited.mcap", log)
+    rows = verify(str(out), client=client).to_pylist()
+    assert [r["verdict"] for r in rows] == ["identical", "identical", "diverged", "identical"]
+    bad = rows[2]
+    assert bad["first_divergent_step"] == 12 and bad["ulps"] == 1
+    assert "'box'" in bad["where"] and bad["field"].startswith("position")
+    assert pq.read_table(out / "verify.parquet").to_pylist() == rows

@@ -66,7 +66,13 @@ def register(subparsers) -> None:
         "(one worker process per core) or an existing one; write OUT/runs.parquet, the logs, "
         "plots and a summary. Running the same command again resumes.",
     )
-    p.add_argument("sweep", help="sweep file (YAML)")
+    p.add_argument(
+        "sweep",
+        metavar="SWEEP.yaml | verify",
+        help="the sweep file (YAML); or `verify DIR`: replay every log of the sweep in DIR "
+        "on the cluster and write DIR/verify.parquet (identical, or the first divergence)",
+    )
+    p.add_argument("dir", nargs="?", metavar="DIR", help=argparse.SUPPRESS)
     p.add_argument(
         "-o", "--out", help="output folder (default: runs/STEM, STEM the sweep file's name)"
     )
@@ -414,7 +420,61 @@ def _summary(result: SweepResult) -> list[str]:
     return lines
 
 
+def cmd_verify(args: argparse.Namespace) -> int:
+    from isaac.app.sweep.verify import VERIFY_TABLE, verify
+
+    if args.dir is None:
+        raise IsaacError("isaac sweep verify DIR: give the sweep's output folder")
+    started = time.perf_counter()
+    table = verify(
+        args.dir,
+        scheduler=args.scheduler,
+        workers=args.workers,
+        progress=not args.quiet and sys.stderr.isatty(),
+    )
+    rows = table.to_pylist()
+    counts: dict[str, int] = {}
+    for r in rows:
+        counts[r["verdict"]] = counts.get(r["verdict"], 0) + 1
+    took = time.perf_counter() - started
+    print(
+        f"verify {args.dir}: {len(rows)} logs: "
+        + ", ".join(f"{n} {v}" for v, n in sorted(counts.items()))
+        + f" ({took:.1f} s)"
+    )
+    bad = [r for r in rows if r["verdict"] != "identical"]
+    for r in bad[:10]:
+        where = ", ".join(
+            str(x)
+            for x in (
+                r["channel"],
+                r["where"],
+                r["field"],
+                None if r["ulps"] is None else f"{r['ulps']} ULP",
+                r["detail"],
+            )
+            if x
+        )
+        step = r["first_divergent_step"]
+        at = f" at step {step}" if step is not None else ""
+        print(
+            f"  run {r['index']} ({r['log_path']}): {r['verdict']}{at}"
+            + (f": {where}" if where else "")
+        )
+    if len(bad) > 10:
+        print(f"  ... and {len(bad) - 10} more (verdict column)")
+    print(f"  table: {os.path.join(args.dir, VERIFY_TABLE)}")
+    return 1 if bad else 0
+
+
 def cmd_sweep(args: argparse.Namespace) -> int:
+    if args.sweep == "verify":
+        return cmd_verify(args)
+    if args.dir is not None:
+        raise IsaacError(
+            f"unexpected argument {args.dir!r} (did you mean `isaac sweep verify DIR`?)"
+        )
+
     def stop(signum, frame):  # SIGTERM and SIGHUP stop the sweep as Ctrl-C does
         raise KeyboardInterrupt
 

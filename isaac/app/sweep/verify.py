@@ -1,0 +1,118 @@
+"""`isaac sweep verify DIR`: every log of a sweep replayed on the cluster (`replay.replay_log`, the
+check `isaac replay` makes), one verdict row per run in DIR/verify.parquet.
+
+A sweep recorded on one machine can be checked on another: the logs carry their scenes, and the
+verdict is the replay's own (identical, or the first divergence: step, body, field).
+"""
+
+from __future__ import annotations
+
+import os
+import time
+
+from isaac.app.sweep.spec import SweepError
+
+VERIFY_TABLE = "verify.parquet"
+
+
+def verify_chunk(task: dict) -> list[dict]:
+    """Replay the logs of `task["runs"]` ([(index, absolute log path)]); a verdict row each."""
+    from isaac.errors import IsaacError
+    from replay.compare import replay_log
+
+    rows = []
+    for index, path in task["runs"]:
+        started = time.perf_counter()
+        row = {"index": index, "log_path": task["rel"][str(index)]}
+        try:
+            report = replay_log(path)
+            row["verdict"] = report.verdict
+            row["steps_compared"] = report.steps_compared
+            first = report.divergences[0] if report.divergences else None
+            row["first_divergent_step"] = None if first is None else first.step
+            row["channel"] = None if first is None else first.channel
+            row["where"] = (first.where() or None) if first is not None else None
+            row["field"] = (first.field or None) if first is not None else None
+            row["ulps"] = None if first is None else first.ulps
+            row["detail"] = (first.detail or None) if first is not None else (report.damage or None)
+        except IsaacError as exc:  # not a readable log, another physics version: its verdict
+            row.update(verdict="not replayed", steps_compared=0)
+            row["detail"] = " ".join(str(exc).split())
+        row["wall_time_s"] = time.perf_counter() - started
+        rows.append(row)
+    return rows
+
+
+def verify(out_dir: str, *, client=None, scheduler=None, workers=None, progress=False):
+    """Replay every log named in OUT/runs.parquet; (pyarrow.Table of verdicts, sorted by index,
+    written to OUT/verify.parquet). SweepError for a folder that holds no sweep table."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+    from dask.distributed import as_completed
+
+    from isaac.app.sweep.command import _start
+    from isaac.app.sweep.table import TABLE
+
+    source = os.path.join(out_dir, TABLE)
+    try:
+        runs = pq.read_table(source).to_pylist()
+    except FileNotFoundError:
+        raise SweepError("no such file (is the folder a sweep's output?)", source=source) from None
+    except Exception as exc:  # noqa: BLE001 - whatever pyarrow raises for a damaged table
+        raise SweepError(f"not a readable table: {exc}", source=source) from None
+    logged = [(r["index"], r.get("log_path")) for r in runs if r.get("log_path")]
+    if not logged:
+        raise SweepError("no run of this sweep has a log (record: none?)", source=source)
+    out_dir = os.path.abspath(out_dir)
+    own = client is None
+    cluster = None
+    bar = None
+    rows: list[dict] = []
+    try:
+        if own:
+            client, cluster = _start(scheduler, workers)
+        n_workers = max(1, len(client.scheduler_info().get("workers", {})))
+        size = max(1, min(20, -(-len(logged) // (n_workers * 8))))
+        rel = {str(i): p for i, p in logged}
+        tasks = [
+            {"runs": [(i, os.path.join(out_dir, p)) for i, p in logged[k : k + size]], "rel": rel}
+            for k in range(0, len(logged), size)
+        ]
+        if progress:
+            from tqdm import tqdm
+
+            bar = tqdm(total=len(logged), unit="log", desc="verify")
+        futures = client.map(verify_chunk, tasks, pure=False)
+        for future in as_completed(futures):
+            got = future.result()
+            rows.extend(got)
+            if bar is not None:
+                bar.update(len(got))
+    finally:
+        if bar is not None:
+            bar.close()
+        if own:
+            client.close()
+        if cluster is not None:
+            cluster.close()
+    rows.sort(key=lambda r: r["index"])
+    schema = pa.schema(
+        [
+            pa.field("index", pa.int64()),
+            pa.field("log_path", pa.string()),
+            pa.field("verdict", pa.string()),
+            pa.field("steps_compared", pa.int64()),
+            pa.field("first_divergent_step", pa.int64()),
+            pa.field("channel", pa.string()),
+            pa.field("where", pa.string()),
+            pa.field("field", pa.string()),
+            pa.field("ulps", pa.int64()),
+            pa.field("detail", pa.string()),
+            pa.field("wall_time_s", pa.float64()),
+        ]
+    )
+    table = pa.Table.from_pylist(rows, schema=schema)
+    path = os.path.join(out_dir, VERIFY_TABLE)
+    pq.write_table(table, path + ".tmp")
+    os.replace(path + ".tmp", path)
+    return table
