@@ -19,7 +19,12 @@ from isaac.scene import (
 )
 from isaac.scene.polygon import mass_properties
 
-SCENES = sorted((Path(__file__).resolve().parent.parent / "scenes").glob("*.yaml"))
+# the shipped scenes; a sweep file (`*.sweep.yaml`, isaac sweep) beside them is not a scene
+SCENES = sorted(
+    p
+    for p in (Path(__file__).resolve().parent.parent / "scenes").glob("*.yaml")
+    if not p.name.endswith(".sweep.yaml")
+)
 BOX = "shape: {box: [1.0, 1.0]}"
 
 
