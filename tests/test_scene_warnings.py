@@ -166,6 +166,31 @@ def test_a_centre_just_outside_concrete_is_an_overlap_not_inside():
     assert "1 pair of bodies overlaps at step 0" in line and "by 0.05 m" in line
 
 
+def test_a_body_entering_later_into_concrete_beyond_the_slop_is_named_at_its_entry():
+    # a box entering at 1 s sunk 0.1 m into the floor (its centre 0.4 m above the floor)
+    text = """
+world: {steps: 200, dt: 0.01}
+bodies:
+  - {name: floor, shape: {box: [10, 1]}, position: [0, -0.5], concrete: true}
+  - {name: drop, shape: {box: [1, 1]}, position: [0, 0.4], enters_at: 1.0}
+"""
+    (line,) = _warnings(text)
+    assert line.startswith("s.yaml:5: bodies[1]: the body 'drop' enters at step 100 (t = 1 s)")
+    assert "overlapping the concrete body 'floor' by 0.1 m" in line
+    assert _warnings(text.replace("[0, 0.4]", "[0, 0.498]")) == []  # 2 mm: within the slop
+
+
+def test_a_concrete_body_entering_where_a_body_started_is_not_warned_of():
+    # the box exists from step 0 and may have moved by the time the concrete body appears
+    text = """
+world: {steps: 200, dt: 0.01}
+bodies:
+  - {name: gate, shape: {box: [10, 1]}, position: [0, -0.5], concrete: true, enters_at: 1.0}
+  - {name: box, shape: {box: [1, 1]}, position: [0, 0.4]}
+"""
+    assert _warnings(text) == []
+
+
 # --- overlaps at step 0 -----------------------------------------------------------------------
 
 

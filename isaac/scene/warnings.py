@@ -11,11 +11,13 @@ the worst case and counting the others, so a scene of 100,000 bodies gives a few
 - a body that never exists in the run: it enters after the run's last step, or enters and
   leaves between two steps (a body exists at step k while enters_at <= k * dt < leaves_at, the
   engine's rule, isaac.engine.world.Model);
-- a body whose centre of mass lies inside a concrete body they both exist at some step: the
-  push-out can only move it the shortest way out, which may be through the concrete;
+- a body whose centre of mass lies inside a concrete body when it first exists (a body does
+  not move before it exists, a concrete body never moves, so this is known from the scene):
+  the push-out can only move it the shortest way out, which may be through the concrete;
 - bodies that overlap at step 0 by more than the slop (`world.slop`, at most SLOP_SHARE of the
   thinner body's thickness, as isaac.engine.push_out caps it): the first steps push them apart
-  instead of starting from the scene as written.
+  instead of starting from the scene as written; and a body entering later that overlaps a
+  concrete body by more than the slop when it appears.
 The geometry is isaac.scene.overlaps (numpy; `isaac check` loads no compiled code).
 
 Mass ratio. A light body under a much heavier one is squeezed into what it rests on once the
@@ -178,62 +180,82 @@ def _never_exist(scene: Scene, steps: int, first: np.ndarray, last: np.ndarray) 
 
 
 def _placement(scene: Scene, first: np.ndarray, last: np.ndarray) -> list[str]:
-    """Bodies inside concrete bodies, and overlaps at step 0 beyond the slop."""
+    """Bodies inside concrete bodies, overlaps at step 0 beyond the slop, and bodies entering
+    later that overlap a concrete body beyond it. A body does not move before it exists, so it
+    appears where the scene puts it; a concrete body never moves: their overlap at the movable
+    body's first step is known from the scene alone."""
     bodies = scene.bodies
-    if len(bodies) < 2:
+    n = len(bodies)
+    if n < 2:
         return []
     placed = overlaps.place(bodies)
     a, b, complete = overlaps.box_pairs(placed.lo, placed.hi, MAX_PAIRS)
-    concrete = np.fromiter((x.concrete for x in bodies), dtype=bool, count=len(bodies))
+    concrete = np.fromiter((x.concrete for x in bodies), dtype=bool, count=n)
     keep = ~(concrete[a] & concrete[b])  # two concrete bodies never collide
     a, b = a[keep], b[keep]
     lines = []
-    # inside: the movable body's centre inside the concrete one, at some step they share
+    # a movable body beside a concrete one that exists at the movable body's first step
     one = concrete[a] ^ concrete[b]
-    c = np.where(concrete[a], a, b)[one]
-    m = np.where(concrete[a], b, a)[one]
-    share = np.maximum(first[c], first[m]) <= np.minimum(last[c], last[m])
-    c, m = c[share], m[share]
-    deep = overlaps.centre_depths(placed, c, m)
+    c = np.where(concrete[a], a, b)
+    m = np.where(concrete[a], b, a)
+    k = first[m]
+    meets = one & (k <= last[m]) & (first[c] <= k) & (k <= last[c])
+    # inside: the movable body's centre inside the concrete one
+    deep = np.zeros(len(a))
+    deep[meets] = overlaps.centre_depths(placed, c[meets], m[meets])
     inside = deep > 0.0
-    n = len(bodies)
-    inside_keys = np.zeros(0, dtype=np.int64)
     if inside.any():
-        c, m, deep = c[inside], m[inside], deep[inside]
-        worst = int(np.argmax(deep))
+        worst = int(np.argmax(np.where(inside, deep, -np.inf)))
         i, j = int(m[worst]), int(c[worst])
-        inside_keys = np.minimum(c, m) * n + np.maximum(c, m)  # a pair as one integer
         lines.append(
             f"{_where(scene, i)}the body {shown(bodies[i].name)} is placed inside the "
             f"concrete body {shown(bodies[j].name)} (its centre {float(deep[worst]):.3g} m "
             "deep): the push-out moves it out the shortest way, which may be through the "
-            f"concrete{_more(len(deep) - 1, 'bodies inside concrete bodies')}"
+            f"concrete{_more(int(inside.sum()) - 1, 'bodies inside concrete bodies')}"
         )
-    # overlap at step 0
-    now = (first[a] == 0) & (last[a] >= 0) & (first[b] == 0) & (last[b] >= 0)
-    a, b = a[now], b[now]
-    fresh = ~np.isin(a * n + b, inside_keys)  # reported as inside already
-    a, b = a[fresh], b[fresh]
+    # overlaps beyond the slop: any two bodies at step 0; a body entering later and a
+    # concrete body (pairs reported as inside are not reported again)
+    at_start = (first[a] == 0) & (last[a] >= 0) & (first[b] == 0) & (last[b] >= 0)
+    entering = meets & (k > 0)
+    asked = (at_start | entering) & ~inside
     slop = np.minimum(
         scene.world.slop, SLOP_SHARE * np.minimum(placed.thickness[a], placed.thickness[b])
     )
+    # the MTD is never more than the boxes' overlap on either axis: SAT only beyond the slop
     box_overlap = np.minimum(placed.hi[a], placed.hi[b]) - np.maximum(placed.lo[a], placed.lo[b])
-    maybe = box_overlap.min(axis=1) > slop
-    a, b, slop = a[maybe][:MAX_SAT_PAIRS], b[maybe][:MAX_SAT_PAIRS], slop[maybe][:MAX_SAT_PAIRS]
-    complete = complete and int(maybe.sum()) <= MAX_SAT_PAIRS
-    depth = overlaps.depths(placed, a, b)
-    over = depth > slop
-    if over.any():
-        a, b, depth = a[over], b[over], depth[over]
-        worst = int(np.argmax(depth))
-        i, j = int(a[worst]), int(b[worst])
-        count = f"{len(depth)}" if complete else f"at least {len(depth)}"
-        pairs = "pair of bodies overlaps" if len(depth) == 1 else "pairs of bodies overlap"
-        lines.append(
-            f"{_where(scene, i)}{count} {pairs} at step 0 by more than the slop (world.slop "
-            f"{scene.world.slop!r} m, at most {SLOP_SHARE:.0%} of the thinner body's thickness): "
-            f"{shown(bodies[i].name)} and {shown(bodies[j].name)} by "
-            f"{float(depth[worst]):.3g} m, the most; the first steps push them apart instead "
-            "of starting from the scene as written"
-        )
+    asked &= box_overlap.min(axis=1) > slop
+    ask = np.flatnonzero(asked)
+    complete = complete and len(ask) <= MAX_SAT_PAIRS
+    ask = ask[:MAX_SAT_PAIRS]
+    depth = np.zeros(len(a))
+    depth[ask] = overlaps.depths(placed, a[ask], b[ask])
+    over = asked & (depth > slop)
+    slop_is = (
+        f"the slop (world.slop {scene.world.slop!r} m, at most {SLOP_SHARE:.0%} of the thinner "
+        "body's thickness)"
+    )
+    for group, what in ((over & at_start, "start"), (over & ~at_start, "enter")):
+        if not group.any():
+            continue
+        worst = int(np.argmax(np.where(group, depth, -np.inf)))
+        count = int(group.sum())
+        if what == "start":
+            i, j = int(a[worst]), int(b[worst])
+            many = f"{count}" if complete else f"at least {count}"
+            pairs = "pair of bodies overlaps" if count == 1 else "pairs of bodies overlap"
+            lines.append(
+                f"{_where(scene, i)}{many} {pairs} at step 0 by more than {slop_is}: "
+                f"{shown(bodies[i].name)} and {shown(bodies[j].name)} by "
+                f"{float(depth[worst]):.3g} m, the most; the first steps push them apart "
+                "instead of starting from the scene as written"
+            )
+        else:
+            i, j = int(m[worst]), int(c[worst])
+            lines.append(
+                f"{_where(scene, i)}the body {shown(bodies[i].name)} enters at step "
+                f"{int(k[worst])} (t = {int(k[worst]) * scene.world.dt:.6g} s) overlapping the "
+                f"concrete body {shown(bodies[j].name)} by {float(depth[worst]):.3g} m, more "
+                f"than {slop_is}: it is pushed out as it appears"
+                f"{_more(count - 1, 'bodies entering into concrete bodies')}"
+            )
     return lines
