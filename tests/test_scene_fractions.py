@@ -152,3 +152,10 @@ def test_check_prints_the_time_step_as_written_and_its_value(tmp_path):
     )
     assert done.returncode == 0, done.stderr
     assert f"dt 1/120 s ({1 / 120!r}), 40 steps" in done.stdout
+
+
+def test_a_warning_names_a_time_as_written():
+    from isaac.scene.warnings import scene_warnings
+
+    (line,) = scene_warnings(load_scene_text(SCENE), steps=20)  # the box enters at 1/3 s
+    assert "the body 'box' enters at 1/3 s, after the run's last step (20, t = 0.166667 s)" in line

@@ -79,6 +79,12 @@ def _where(scene: Scene, i: int) -> str:
     return f"{scene.source}: "
 
 
+def _time(scene: Scene, i: int, field: str) -> str:
+    """Body i's time `field` as the scene wrote it (`1/3`), else its repr."""
+    written = dict(scene.as_written).get(f"bodies[{i}].{field}")
+    return written or repr(getattr(scene.bodies[i], field))
+
+
 def _more(count: int, what: str) -> str:
     return f"; and {count} more {what}" if count else ""
 
@@ -161,8 +167,9 @@ def _never_exist(scene: Scene, steps: int, first: np.ndarray, last: np.ndarray) 
     if len(late):
         i = int(late[0])
         b = scene.bodies[i]
+        enters = _time(scene, i, "enters_at")
         lines.append(
-            f"{_where(scene, i)}the body {shown(b.name)} enters at {b.enters_at!r} s, after "
+            f"{_where(scene, i)}the body {shown(b.name)} enters at {enters} s, after "
             f"{end}: it never exists in the run (raise world.steps or --steps, or enter "
             f"earlier){_more(len(late) - 1, 'bodies likewise')}"
         )
@@ -171,9 +178,10 @@ def _never_exist(scene: Scene, steps: int, first: np.ndarray, last: np.ndarray) 
         i = int(between[0])
         b = scene.bodies[i]
         k = int(first[i])
+        enters, leaves = _time(scene, i, "enters_at"), _time(scene, i, "leaves_at")
         lines.append(
-            f"{_where(scene, i)}the body {shown(b.name)} enters at {b.enters_at!r} s and "
-            f"leaves at {b.leaves_at!r} s, between steps {k - 1} and {k} (dt {dt!r} s): it "
+            f"{_where(scene, i)}the body {shown(b.name)} enters at {enters} s and "
+            f"leaves at {leaves} s, between steps {k - 1} and {k} (dt {dt!r} s): it "
             f"never exists at a step{_more(len(between) - 1, 'bodies likewise')}"
         )
     return lines
