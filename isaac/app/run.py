@@ -27,6 +27,13 @@ def register(subparsers) -> None:
         "--profile", action="store_true", help="print time spent in each stage of the step"
     )
     run.add_argument(
+        "--offload",
+        choices=("auto", "process", "thread", "none"),
+        default="auto",
+        help="where the files are written: writer processes, a thread, or this process "
+        "(default auto: processes when the machine has an idle CPU for each, else a thread)",
+    )
+    run.add_argument(
         "--force",
         action="store_true",
         help="replace an OUT.partial file left by an earlier run (default: refuse, so that "
@@ -167,7 +174,9 @@ def cmd_run(args: argparse.Namespace) -> int:
         if claims:
             from recorder import Recorder
 
-            recorder = Recorder(sim, mcap_path=claims.get("mcap"), rrd_path=claims.get("rrd"))
+            recorder = Recorder(
+                sim, mcap_path=claims.get("mcap"), rrd_path=claims.get("rrd"), offload=args.offload
+            )
             claims = {}  # the recorder owns them now
             recorder.write(first)
         if not args.quiet and sys.stderr.isatty():
@@ -212,8 +221,8 @@ def cmd_run(args: argparse.Namespace) -> int:
                     recorder.close(complete=True)
                 else:
                     reason = stopped[1] if stopped else "the run failed"
-                    # the last step handed to the recorder: "stopped at" as the summary says it
-                    recorder.close(complete=False, stopped_at=last.step, reason=reason)
+                    # stopped at the last step the recorder took (its default), as the summary says
+                    recorder.close(complete=False, reason=reason)
                 if stopped is None:  # a signal the loop did not act on: during the close
                     signal_in_close = stop.signal
         finally:
@@ -231,7 +240,9 @@ def cmd_run(args: argparse.Namespace) -> int:
     # whose state the run completed and, with files, the last step in them
     files = " and ".join(out for out in (args.mcap, args.rrd) if out)
     where = f"the last step in {files}" if files else "the last step simulated"
-    stopped_at = f"stopped at step {last.step}, {where}"
+    # with files: the recorder's last step (a NaN it found mid-batch stops the log before it)
+    recorded = recorder.last_step if recorder is not None else None
+    stopped_at = f"stopped at step {last.step if recorded is None else recorded}, {where}"
     ran = f"{taken} steps"
     if stopped is not None:  # the error itself is the last line, on stderr
         ran = f"{'failed' if stopped[0] == 'error' else stopped[1]}: {taken} of {steps} steps"
@@ -251,7 +262,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     if recorder:
         print(
             f"  recording: files finished {finished_files:.2f} s after the last step (the "
-            f"writers' last steps, summary, index)"
+            f"writers' last steps, summary, index); written by offload {recorder.offload}"
         )
     if args.verbose and first_step_at is not None:
         print(
