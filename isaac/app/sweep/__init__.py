@@ -12,6 +12,7 @@ Outline (docs/sweep-format.md is the sweep file's contract):
 - `metrics`  the measured columns (final_state, max_depth, energy_drift, contacts, tunneled).
 - `table`    runs.parquet (pyarrow): columns, rows, and what a resumed sweep keeps.
 - `plots`    PNG histograms and metric-against-parameter plots (matplotlib, the `plot` extra).
+- `cluster`  the Dask cluster: an existing one by address, or a local one on 127.0.0.1.
 - `verify`   `isaac sweep verify DIR`: every log replayed on the cluster, a verdict table.
 - `command`  the command line and `run`, the Python API.
 

@@ -19,7 +19,6 @@ far; running the same command again resumes.
 from __future__ import annotations
 
 import argparse
-import logging
 import math
 import os
 import shutil
@@ -30,6 +29,7 @@ import time
 from dataclasses import dataclass
 
 from isaac.app.sweep import worker as work
+from isaac.app.sweep.cluster import start_cluster
 from isaac.app.sweep.spec import Sweep, SweepError, check_runs, load_sweep
 from isaac.errors import IsaacError
 
@@ -158,47 +158,6 @@ def _prepare_out(sweep: Sweep, out: str) -> None:
         ) from None
 
 
-class _IgnoreInterrupt:
-    """Worker plugin of the local cluster: Ctrl-C reaches every process of the terminal's group;
-    the workers leave it to the client, which cancels their tasks and shuts them down (a worker
-    interrupted on its own would print tracebacks and be restarted)."""
-
-    name = "isaac-sweep-ignore-sigint"
-
-    def setup(self, worker=None) -> None:
-        try:
-            signal.signal(signal.SIGINT, signal.SIG_IGN)
-        except ValueError:  # not the main thread of the worker process
-            pass
-
-
-def _start(scheduler, workers):
-    """(client, cluster or None, whether the workers are on this machine)."""
-    from dask.distributed import Client, LocalCluster
-
-    address = scheduler or os.environ.get("DASK_SCHEDULER_ADDRESS")
-    if address:
-        return Client(address), None
-    n = workers or len(os.sched_getaffinity(0))  # one worker process per core we may use
-    cluster = LocalCluster(
-        n_workers=n,
-        threads_per_worker=1,
-        processes=True,
-        host="127.0.0.1",  # scheduler and workers listen on this machine only
-        dashboard_address=None,
-        # no dashboard; the scheduler's HTTP routes (health, metrics) on a free port of
-        # 127.0.0.1 (its default, 8787, is taken by a second sweep or another cluster)
-        scheduler_kwargs={"dashboard": False, "dashboard_address": "127.0.0.1:0"},
-        silence_logs=logging.ERROR,
-    )
-    client = Client(cluster)
-    from distributed.diagnostics.plugin import WorkerPlugin
-
-    plugin = type("IgnoreInterrupt", (_IgnoreInterrupt, WorkerPlugin), {})()
-    client.register_plugin(plugin)
-    return client, cluster
-
-
 def _tasks(sweep: Sweep, todo: list[int], out: str, chunk: int) -> list[dict]:
     base = {
         "out": out,
@@ -307,7 +266,7 @@ def _fan_out(sweep, todo, out, done, worlds, client, scheduler, workers, chunk, 
             # the workers share this machine's numba cache: fill it once, here
             work.warm_up(warm, sweep.scene_path, sweep.scene_name)
         if own:
-            client, cluster = _start(scheduler, workers)
+            client, cluster = start_cluster(scheduler, workers)
         if local:
             # each worker process loads them from the cache now, all at once, rather than
             # inside its first run

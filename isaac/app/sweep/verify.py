@@ -50,7 +50,7 @@ def verify(out_dir: str, *, client=None, scheduler=None, workers=None, progress=
     import pyarrow.parquet as pq
     from dask.distributed import as_completed
 
-    from isaac.app.sweep.command import _start
+    from isaac.app.sweep.cluster import start_cluster
     from isaac.app.sweep.table import TABLE
 
     source = os.path.join(out_dir, TABLE)
@@ -70,7 +70,7 @@ def verify(out_dir: str, *, client=None, scheduler=None, workers=None, progress=
     rows: list[dict] = []
     try:
         if own:
-            client, cluster = _start(scheduler, workers)
+            client, cluster = start_cluster(scheduler, workers)
         n_workers = max(1, len(client.scheduler_info().get("workers", {})))
         size = max(1, min(20, -(-len(logged) // (n_workers * 8))))
         rel = {str(i): p for i, p in logged}
