@@ -204,3 +204,12 @@ def test_a_batch_record_pickles_as_a_plain_step_record_with_the_same_bits():
     copy = pickle.loads(pickle.dumps(record))
     assert type(copy) is StepRecord and repr(copy).startswith("StepRecord(step=8")
     _same_record(record, copy)
+
+
+def test_a_record_after_advance_goes_through_the_compiled_finiteness_check():
+    from isaac.engine.diagnostics import all_finite
+
+    sim = Simulation(_pile("balanced"))
+    sim.advance(25)
+    record = sim.record()
+    assert len(record.contacts) > 0 and all_finite(record)

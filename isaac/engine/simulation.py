@@ -9,7 +9,7 @@ import numpy as np
 
 from isaac.engine.driver import Stepper
 from isaac.engine.integrate import DIVERGED_ANGLE, DIVERGED_POSITION, DIVERGED_SPEED, diverged_body
-from isaac.engine.records import Contacts, StepBatch, StepRecord
+from isaac.engine.records import CONTACT_FIELDS, Contacts, StepBatch, StepRecord
 from isaac.engine.step import ContactCache, StepSettings, Workspace, detect, step
 from isaac.engine.world import Model, State, build_model, initial_state
 from isaac.errors import SimulationError
@@ -181,11 +181,13 @@ class Simulation:
         """The contacts of the step that made the current state."""
         if self._contacts is None:
             batch = self._stepper.redo_last(self.state)
-            self._contacts = (
-                StepBatch(self.state.step, self.scene.world.dt, batch, 1).contacts_of(0)
-                if batch is not None
-                else Contacts.empty()
-            )
+            if batch is None:
+                self._contacts = Contacts.empty()
+            else:
+                # private writable copies, like the staged step's (a record mixing writable
+                # and read-only arrays is typed apart by compiled consumers: all_finite failed)
+                rows = StepBatch(self.state.step, self.scene.world.dt, batch, 1).contacts_of(0)
+                self._contacts = Contacts(*(getattr(rows, f).copy() for f in CONTACT_FIELDS))
         return self._contacts
 
     def batches(self, steps: int | None = None, *, size: int = 64) -> Iterator[StepBatch]:
