@@ -17,6 +17,14 @@ PLOTTED = (
     "contacts",
     "tunneled",
 )
+LABELS = {
+    "final_com_x": "final_com_x (m): centre of mass of the moving bodies at the end",
+    "final_com_y": "final_com_y (m): centre of mass of the moving bodies at the end",
+    "max_depth": "max_depth (m): deepest contact penetration",
+    "energy_drift": "energy_drift: (E_end - E_0) / |E_0|",
+    "contacts": "contacts: contact points over all steps",
+    "tunneled": "tunneled: bodies that passed through concrete",
+}
 
 
 def _safe(name: str) -> str:
@@ -52,7 +60,7 @@ def plot_all(table, sweep, out_dir: str) -> list[str] | None:
             continue  # a constant (or empty) column: the summary says its value
         fig, ax = plt.subplots(figsize=(6, 4), dpi=100)
         ax.hist(values, bins=min(50, max(5, int(len(values) ** 0.5))), color="tab:blue")
-        ax.set_xlabel(metric)
+        ax.set_xlabel(LABELS.get(metric, metric))
         ax.set_ylabel("runs")
         ax.set_title(title, fontsize=9)
         fig.tight_layout()
@@ -79,7 +87,7 @@ def plot_all(table, sweep, out_dir: str) -> list[str] | None:
                 ax.scatter([where[str(x)] for x in xs], ys, s=8, alpha=0.6, color="tab:blue")
                 ax.set_xticks(range(len(cats)), cats, rotation=30, fontsize=8)
             ax.set_xlabel(param)
-            ax.set_ylabel(metric)
+            ax.set_ylabel(LABELS.get(metric, metric).split(":")[0])
             ax.set_title(title, fontsize=9)
             fig.tight_layout()
             path = os.path.join(folder, f"{_safe(metric)}-vs-{_safe(param)}.png")
