@@ -4,7 +4,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: run test test-all test-viewer lint bench clean
+.PHONY: run test test-all test-viewer test-arm64 lint bench clean
 
 $(BIN)/python:
 	@test -n "$(PYTHON)" && $(PYTHON) -c "import sys; sys.exit(sys.version_info < (3, 11))" || { echo "error: needs Python >= 3.11 (set PYTHON=...)"; exit 2; }
@@ -32,6 +32,11 @@ lint: $(STAMP)
 
 test-all: $(STAMP)
 	$(BIN)/python -m pytest -q -m ''
+
+# slow (about 30 min the first time): replays the golden corpus on an emulated arm64 Debian
+# userland under qemu-user, with the JIT and without (needs root; docs/replay.md)
+test-arm64:
+	scripts/arm64_replay.sh
 
 bench: $(STAMP)
 	$(BIN)/python -m pip install --quiet -e '.[bench]'
