@@ -54,10 +54,12 @@ class Recorder:
         for Foxglove's 3D panel; off by default (it costs more than the physics channels).
     impulse_scale: length (m) of an impulse arrow per N s in the Rerun view; default from the
         scene's sizes and masses (written in the recording).
-    offload: where the files are encoded and written: "process" (default: one child process per
-        file, fed through shared memory, see recorder.writer_process), "thread" (MCAP in a
-        thread of this process, Rerun in the caller) or "none" (all in the caller). The files'
-        bytes are the same in all three.
+    offload: where the files are encoded and written: "process" (one child process per file,
+        fed through shared memory, see recorder.writer_process), "thread" (MCAP in a thread of
+        this process, Rerun in the caller), "none" (all in the caller), or "auto" (default:
+        "process" when the machine has an idle CPU per writer, else "thread":
+        `recorder.writer_process.choose_offload`, which gives the measurements). The files'
+        bytes are the same in all of them; ``self.offload`` says which was used.
     """
 
     def __init__(
@@ -71,7 +73,7 @@ class Recorder:
         flush_every: int = 100,
         foxglove: bool = False,
         impulse_scale: float | None = None,
-        offload: str = "process",
+        offload: str = "auto",
         replace_partial: bool = False,
     ) -> None:
         self.mcap = None
@@ -84,8 +86,13 @@ class Recorder:
         self._cpus = iter(())
         self._restore_affinity: set[int] | None = None
         try:
-            if offload not in ("process", "thread", "none"):
-                raise ValueError("offload must be 'process', 'thread' or 'none'")
+            if offload not in ("auto", "process", "thread", "none"):
+                raise ValueError("offload must be 'auto', 'process', 'thread' or 'none'")
+            if offload == "auto":
+                from recorder.writer_process import choose_offload
+
+                offload = choose_offload((mcap_path is not None) + (rrd_path is not None))
+            self.offload = offload
             self._claim(mcap_path, rrd_path, replace_partial)
         except BaseException:
             for c in (mcap_path, rrd_path):
@@ -286,18 +293,19 @@ class Recorder:
 
     def write_batch(self, batch) -> None:
         """Record the steps of an `isaac.engine.records.StepBatch` (`Simulation.batches`), in
-        order after the steps written so far. Writer processes take the MCAP frames of a whole
-        batch from one compiled call (`WriterProcess.write_batch`); other writers take its
-        records one by one. A NaN or infinity raises SimulationError as `write` does, with every
-        step before it recorded."""
+        order after the steps written so far. MCAP writers (a writer process, or in this
+        process without a thread) take the frames of a whole batch from one compiled call
+        (`recorder.pack.pack_frames`); with any other writer the batch's records go one by one.
+        A NaN or infinity raises SimulationError as `write` does, with every step before it
+        recorded."""
         if self.closed:
             raise LogError("the recorder is closed")
         writers = [w for w in (self.mcap, self.rerun) if w is not None]
-        if not writers or not all(hasattr(w, "write_batch") for w in writers):
+        if not writers or not all(getattr(w, "takes_batches", False) for w in writers):
             for s in range(batch.steps):
                 self.write(batch.record(s))
             return
-        sent = [w.write_batch(batch) for w in writers]
+        sent = [w.write_batch(batch, self.gravity) for w in writers]
         good = min(sent)
         if good:
             self.steps_written += good

@@ -132,6 +132,31 @@ def plan_cpus(writers: int) -> tuple[set[int], list[set[int]]] | None:
     return set(allowed) - set(writer_cpus), plan
 
 
+def choose_offload(writers: int, cpus: int | None = None, load: float | None = None) -> str:
+    """What `Recorder(offload="auto")` picks: "process" when the machine has an idle CPU for
+    each writer besides the simulation's own (cpus: the CPUs this process may use; load: the
+    one-minute load average, this process included), else "thread".
+
+    Measured on the 2-core machine with two other busy processes (load 5-6), whole recorded
+    runs: head_on 20,000 steps MCAP: process 12.6 s, thread 3.8 s, none 16.9 s; default scene
+    600 steps MCAP + .rrd: process 24.9 s, thread 5.4 s, none 6.5 s; pile MCAP + .rrd: 14.4,
+    8.0, 9.1 s. Writer processes pay only when they have CPUs to themselves (the recording
+    bench, on an idle machine: see bench/README.md).
+    """
+    if cpus is None:
+        try:
+            cpus = len(os.sched_getaffinity(0))
+        except (AttributeError, OSError):
+            cpus = os.cpu_count() or 1
+    if load is None:
+        try:
+            load = os.getloadavg()[0]
+        except OSError:
+            load = float(cpus)
+    idle = cpus - max(0.0, load - 1.0)  # the load counts this process too
+    return "process" if idle >= writers + 1 else "thread"
+
+
 def _map(fd: int, size: int) -> mmap.mmap:
     flags = mmap.MAP_SHARED | getattr(mmap, "MAP_POPULATE", 0)
     return mmap.mmap(fd, size, flags=flags)
@@ -267,11 +292,14 @@ class WriterProcess:
         self._announce(pos, size, end)
         return True
 
-    def write_batch(self, batch) -> int:
+    takes_batches = True  # `write_batch`
+
+    def write_batch(self, batch, gravity=None) -> int:
         """Hand the steps of a `isaac.engine.records.StepBatch` to the child, their MCAP frames
         packed by one compiled call per stretch of the ring (`recorder.pack.pack_frames`) rather
-        than one call per step. Returns how many steps were sent: all of them, or the steps
-        before the first one holding a NaN or an infinity (the caller says which)."""
+        than one call per step (gravity: unused, the child has it). Returns how many steps were
+        sent: all of them, or the steps before the first one holding a NaN or an infinity (the
+        caller says which)."""
         if self.kind == "rerun" or not self._compiled:
             for s in range(batch.steps):
                 if not self.write(batch.record(s)):

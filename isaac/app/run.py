@@ -27,6 +27,13 @@ def register(subparsers) -> None:
         "--profile", action="store_true", help="print time spent in each stage of the step"
     )
     run.add_argument(
+        "--offload",
+        choices=("auto", "process", "thread", "none"),
+        default="auto",
+        help="where the files are written: writer processes, a thread, or this process "
+        "(default auto: processes when the machine has an idle CPU for each, else a thread)",
+    )
+    run.add_argument(
         "--force",
         action="store_true",
         help="replace an OUT.partial file left by an earlier run (default: refuse, so that "
@@ -167,7 +174,9 @@ def cmd_run(args: argparse.Namespace) -> int:
         if claims:
             from recorder import Recorder
 
-            recorder = Recorder(sim, mcap_path=claims.get("mcap"), rrd_path=claims.get("rrd"))
+            recorder = Recorder(
+                sim, mcap_path=claims.get("mcap"), rrd_path=claims.get("rrd"), offload=args.offload
+            )
             claims = {}  # the recorder owns them now
             recorder.write(first)
         if not args.quiet and sys.stderr.isatty():
@@ -253,7 +262,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     if recorder:
         print(
             f"  recording: files finished {finished_files:.2f} s after the last step (the "
-            f"writers' last steps, summary, index)"
+            f"writers' last steps, summary, index); written by offload {recorder.offload}"
         )
     if args.verbose and first_step_at is not None:
         print(

@@ -291,7 +291,7 @@ sys.path.insert(0, {synth_dir!r})
 from recorder_synth import SynthSim, SCENE_TEXT
 from recorder import Recorder
 sim = SynthSim(40, 10)
-rec = Recorder(sim, mcap_path={path!r}, scene_text=SCENE_TEXT)
+rec = Recorder(sim, mcap_path={path!r}, scene_text=SCENE_TEXT, offload="process")
 rec.write(sim.record())
 while True:
     r = sim.step()

@@ -351,7 +351,9 @@ def _mcap_config(rec):
 
 def test_a_frame_larger_than_the_ring_goes_inline_and_arrives_whole(tmp_path):
     sim, records = _records(n=40, contacts=30, steps=20)
-    rec = Recorder(sim, mcap_path=str(tmp_path / "a.mcap"), scene_text=SCENE_TEXT)
+    rec = Recorder(
+        sim, mcap_path=str(tmp_path / "a.mcap"), scene_text=SCENE_TEXT, offload="process"
+    )
     rec.mcap.close()
     rec.mcap = W.WriterProcess("mcap", str(tmp_path / "a.mcap"), _mcap_config(rec), ring_bytes=4096)
     assert F.frame_size(records[5]) > 4096
@@ -371,7 +373,7 @@ def test_nan_through_a_writer_process_names_step_and_body_and_keeps_earlier_step
     pos[3, 1] = np.nan
     records[30] = dataclasses.replace(bad, position=pos)
     path = tmp_path / "nan.mcap"
-    rec = Recorder(sim, mcap_path=str(path), scene_text=SCENE_TEXT)
+    rec = Recorder(sim, mcap_path=str(path), scene_text=SCENE_TEXT, offload="process")
     with pytest.raises(SimulationError, match=r"step 30: body 'body3'"):
         with rec:
             for r in records:
@@ -385,7 +387,9 @@ def test_nan_through_the_rerun_writer_process_names_step_and_contact(tmp_path):
     depth = bad.contacts.depth.copy()  # a field the Rerun frame leaves out, checked all the same
     depth[2] = np.inf
     records[25] = dataclasses.replace(bad, contacts=dataclasses.replace(bad.contacts, depth=depth))
-    rec = Recorder(sim, rrd_path=str(tmp_path / "nan.rrd"), scene_text=SCENE_TEXT)
+    rec = Recorder(
+        sim, rrd_path=str(tmp_path / "nan.rrd"), scene_text=SCENE_TEXT, offload="process"
+    )
     c = bad.contacts
     name_a, name_b = sim.model.names[c.a[2]], sim.model.names[c.b[2]]
     with pytest.raises(
@@ -402,13 +406,18 @@ def test_nan_through_the_rerun_writer_process_names_step_and_contact(tmp_path):
 def test_an_unwritable_output_fails_at_once_in_one_line(tmp_path):
     sim, _ = _records(steps=1)
     with pytest.raises(LogError, match="cannot write .*missing"):
-        Recorder(sim, mcap_path=str(tmp_path / "missing" / "x.mcap"), scene_text=SCENE_TEXT)
+        Recorder(
+            sim,
+            mcap_path=str(tmp_path / "missing" / "x.mcap"),
+            scene_text=SCENE_TEXT,
+            offload="process",
+        )
 
 
 def test_a_writer_process_that_dies_is_reported_with_the_file_name(tmp_path):
     sim, records = _records(steps=200)
     path = tmp_path / "dead.mcap"
-    rec = Recorder(sim, mcap_path=str(path), scene_text=SCENE_TEXT)
+    rec = Recorder(sim, mcap_path=str(path), scene_text=SCENE_TEXT, offload="process")
     rec.wait_ready()
     os.kill(rec.mcap.proc.pid, signal.SIGKILL)
     rec.mcap.proc.wait()
@@ -439,7 +448,9 @@ def test_a_failure_inside_the_writer_process_comes_back_as_its_message(tmp_path)
 def test_drain_returns_once_every_step_is_written(tmp_path):
     sim, records = _records(steps=50)
     path = tmp_path / "d.mcap"
-    rec = Recorder(sim, mcap_path=str(path), scene_text=SCENE_TEXT, flush_every=10)
+    rec = Recorder(
+        sim, mcap_path=str(path), scene_text=SCENE_TEXT, flush_every=10, offload="process"
+    )
     for r in records[:41]:
         rec.write(r)
     rec.drain()  # no waiting after this: the flushed steps are in the file now
@@ -457,6 +468,7 @@ def test_writer_processes_get_cpus_of_their_own_until_the_recorder_closes(tmp_pa
         mcap_path=str(tmp_path / "a.mcap"),
         rrd_path=str(tmp_path / "a.rrd"),
         scene_text=SCENE_TEXT,
+        offload="process",
     )
     mine = os.sched_getaffinity(0)
     theirs = [os.sched_getaffinity(w.proc.pid) for w in (rec.mcap, rec.rerun)]
@@ -499,7 +511,7 @@ def test_rerun_batches_grow_for_bodies_entering_and_more_contact_rows(tmp_path):
         exists[3] = False
         records[k] = dataclasses.replace(records[k], exists=exists)
     path = tmp_path / "grow.rrd"
-    rec = Recorder(sim, rrd_path=str(path), scene_text=SCENE_TEXT)
+    rec = Recorder(sim, rrd_path=str(path), scene_text=SCENE_TEXT, offload="process")
     for r in records:
         rec.write(r)
     rec.close()
