@@ -32,7 +32,8 @@ FRICTION = 0.6
 class BenchScene:
     """A scene and how the benchmark runs it.
 
-    kind: "pyramid", "pile", "head_on", "mass_ratio" or "tunneling" (selects the quality figure).
+    kind: "pyramid", "pile", "head_on", "mass_ratio", "tunneling", "drop" or "off_centre"
+        (selects the quality figure).
     warmup_steps: steps taken before the clock starts (compile and start-up transients excluded).
     timed_steps: steps timed with one perf_counter block.
     info: indices of bodies the quality figure looks at, and scene facts for the report.
@@ -330,12 +331,26 @@ def _tunneling() -> BenchScene:
     )
 
 
+def _shipped(name: str, kind: str, file: str) -> BenchScene:
+    """A scene shipped in scenes/, as a user runs it (its own dt and steps)."""
+    from pathlib import Path
+
+    from isaac.scene import load_scene
+
+    scene = load_scene(str(Path(__file__).resolve().parents[1] / "scenes" / file))
+    steps = scene.world.steps
+    return BenchScene(name, kind, scene, 10, steps - 10, info=dict(source=f"scenes/{file}"))
+
+
 BUILDERS = {
     **{f"pyramid-{r}": (lambda r=r: _pyramid(r)) for r in PYRAMID_ROWS},
     **{f"pile-{c}": (lambda c=c: _pile(c)) for c in PILE_COUNTS},
     "head-on": _head_on,
     "mass-ratio": _mass_ratio,
     "tunneling": _tunneling,
+    # the issue's small scenes, as shipped: a box bouncing on the ground, an off-centre blow
+    "bounce": lambda: _shipped("bounce", "drop", "bounce.yaml"),
+    "off-centre": lambda: _shipped("off-centre", "off_centre", "off_centre.yaml"),
 }
 ALL_SCENES = tuple(BUILDERS)
 QUICK_SCENES = ("pyramid-10", "pyramid-20", "pile-100", "pile-500", "head-on")

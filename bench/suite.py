@@ -58,6 +58,11 @@ TARGETS = (
     ("startup_cached_s", None, 1.5),
     ("startup_first_s", None, 15.0),
 )
+# the fused-stepping issue's targets: ms/step of an ISAAC mode over pymunk's, small scenes
+MODE_TARGETS = (
+    *(("advance", scene, 1.0) for scene in ("head-on", "bounce", "off-centre")),
+    *(("run", scene, 3.0) for scene in ("head-on", "bounce", "off-centre")),
+)
 # the recorder issue's targets (overhead on top of the simulation alone, a fraction) and the
 # replay issue's (replay time per step over that of the original `isaac run --mcap`), measured
 # on the recording scenes with the preset named in the recording rows
@@ -328,6 +333,28 @@ def check_targets(rows, growth_rows, startup_rows, isaac_engines, recordings=())
                     kind="target",
                     engine=engine,
                     what=label,
+                    limit=limit,
+                    value=value,
+                    met=None if value is None else bool(value <= limit),
+                )
+            )
+        for mode, scene, limit in MODE_TARGETS:
+            row = next(
+                (
+                    r
+                    for r in rows
+                    if r.get("engine_arg") == f"{engine}/{mode}" and r["scene"] == scene
+                ),
+                None,
+            )
+            if row is None:  # that mode or scene was not run
+                continue
+            value = row.get("ratio_to_pymunk")
+            out.append(
+                dict(
+                    kind="target",
+                    engine=f"{engine}/{mode}",
+                    what=f"ms/step {engine}/{mode} over pymunk, {scene}",
                     limit=limit,
                     value=value,
                     met=None if value is None else bool(value <= limit),

@@ -49,6 +49,13 @@ def warm_engine(engine_name: str) -> None:
     engine.poses()
 
 
+def _area(vertices) -> float:
+    """Shoelace area (m^2) of a counter-clockwise polygon."""
+    v = np.asarray(vertices, dtype=float)
+    x, y = v[:, 0], v[:, 1]
+    return float(0.5 * (x @ np.roll(y, -1) - y @ np.roll(x, -1)))
+
+
 def measure_quality(bench: BenchScene, polys: LocalPolygons, start: tuple, engine) -> dict:
     pos, ang = engine.poses()
     q: dict = {}
@@ -86,6 +93,16 @@ def measure_quality(bench: BenchScene, polys: LocalPolygons, start: tuple, engin
         q["passed_through"] = passed
         q["stopped"] = len(bullets) - passed
         q["lanes"] = len(bullets)
+    elif bench.kind == "drop":
+        q["final_height_m"] = float(pos[:, 1].max())
+        q.update(quality.overlap_stats(polys, pos, ang))
+    elif bench.kind == "off_centre":
+        # no gravity: the bodies' total linear momentum is conserved (kg m/s)
+        vel, _ = engine.velocities()
+        mass = np.array([b.density * _area(b.vertices) for b in bench.scene.bodies])
+        q["momentum_error_kgmps"] = float(
+            np.hypot(*((mass[:, None] * (vel - start[2])).sum(axis=0)))
+        )
     finite = bool(np.all(np.isfinite(pos)) and np.all(np.isfinite(ang)))
     q["finite"] = finite
     return q
