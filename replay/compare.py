@@ -109,8 +109,9 @@ def versions_note(
     text = "versions or platform differ (" + "; ".join(diffs) + ")"
     if suggest:
         text += (
-            ": bit-identical results are promised only for one version on one machine; "
-            f"compare with --tolerance {SUGGESTED_TOLERANCE:g} instead"
+            ": bit-identical results are promised for the same versions of ISAAC, Python, numpy "
+            "and numba, on any machine (docs/physics.md); if this replay diverges, compare with "
+            f"--tolerance {SUGGESTED_TOLERANCE:g}"
         )
     return text
 

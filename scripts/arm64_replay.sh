@@ -130,7 +130,7 @@ for mode in jit nojit; do
         # shellcheck disable=SC2086
         if out=$(in_root env $extra PYTHONPATH=/opt/isaac sh -c \
             "cd /opt/isaac && python -m isaac replay $f" 2>&1); then rc=0; else rc=$?; fi
-        verdict=$(printf '%s\n' "$out" | tail -n 1)
+        verdict=$(printf '%s\n' "$out" | head -n 1)
         log "$mode $f: exit $rc, $(($(date +%s) - start)) s: $verdict"
         [ $rc = 0 ] || { status=1; printf '%s\n' "$out" | tail -n 20; }
     done
