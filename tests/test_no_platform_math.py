@@ -97,7 +97,7 @@ def test_the_scan_reads_the_call_forms_of_x86_assembly():
 def test_no_fused_multiply_add_and_no_libm_call_in_any_compiled_kernel(tmp_path):
     """Every kernel compiled afresh (an empty NUMBA_CACHE_DIR: numba shows no code for what it
     loads from its cache) by small scenes through every path of the step, then scanned: about
-    100 s of CPU time compiling (slow; `make test-all`). Measured: 55 signatures of 39 kernels,
+    100 s of CPU time compiling (slow; `make test-all`). Measured: 60 signatures of 43 kernels,
     no FMA, no libm call."""
     out = tmp_path / "scan.json"
     env = {k: v for k, v in os.environ.items() if k not in ("NUMBA_DISABLE_JIT", "NUMBA_CPU_NAME")}
@@ -129,7 +129,7 @@ def test_no_fused_multiply_add_and_no_libm_call_in_any_compiled_kernel(tmp_path)
         if found["fma"] or found["libm"]
     }
     assert not bad, bad
-    assert sum(len(k["signatures"]) for k in kernels.values()) >= 40
+    assert sum(len(k["signatures"]) for k in kernels.values()) >= 50
 
 
 # numpy reductions and products whose grouping (pairwise sums, BLAS blocking, threads) depends on
