@@ -27,6 +27,13 @@ def register(subparsers) -> None:
         "--profile", action="store_true", help="print time spent in each stage of the step"
     )
     run.add_argument(
+        "--compression",
+        choices=("zstd", "lz4", "none"),
+        default="none",
+        help="MCAP chunk compression (default: none; docs/log-format.md has the measured cost "
+        "and size of each)",
+    )
+    run.add_argument(
         "--offload",
         choices=("auto", "process", "thread", "none"),
         default="auto",
@@ -175,7 +182,11 @@ def cmd_run(args: argparse.Namespace) -> int:
             from recorder import Recorder
 
             recorder = Recorder(
-                sim, mcap_path=claims.get("mcap"), rrd_path=claims.get("rrd"), offload=args.offload
+                sim,
+                mcap_path=claims.get("mcap"),
+                rrd_path=claims.get("rrd"),
+                offload=args.offload,
+                compression=args.compression,
             )
             claims = {}  # the recorder owns them now
             recorder.write(first)

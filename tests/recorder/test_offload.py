@@ -44,3 +44,22 @@ def test_every_offload_of_isaac_run_writes_the_same_log(tmp_path, offload):
             check=True, capture_output=True, timeout=300,
         )  # fmt: skip
     assert out.read_bytes() == reference.read_bytes()
+
+
+@pytest.mark.parametrize("compression", ["lz4", "zstd"])
+def test_a_compressed_log_is_smaller_and_replays_identical(tmp_path, compression):
+    plain, packed = tmp_path / "none.mcap", tmp_path / f"{compression}.mcap"
+    for out, c in ((plain, "none"), (packed, compression)):
+        subprocess.run(
+            [sys.executable, "-m", "isaac", "run", "scenes/default.yaml", "--steps", "60",
+             "--quiet", "--mcap", str(out), "--compression", c],
+            check=True, capture_output=True, timeout=300,
+        )  # fmt: skip
+    assert packed.stat().st_size < 0.75 * plain.stat().st_size
+    replay = subprocess.run(
+        [sys.executable, "-m", "isaac", "replay", str(packed)],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert replay.returncode == 0 and replay.stdout.startswith("identical"), replay.stdout
