@@ -190,6 +190,18 @@ def cmd_run(args: argparse.Namespace) -> int:
             )
             claims = {}  # the recorder owns them now
             recorder.write(first)
+        if args.mcap:
+            from recorder.frames import ROWS_PER_MOVING_BODY as ROWS_PER_MOVING
+            from recorder.frames import expected_log_bytes
+
+            moving = sum(not b.concrete for b in scene.bodies)
+            per_step, total = expected_log_bytes(sim.n_bodies, moving, steps)
+            print(
+                f"expected MCAP log size: about {_size(total)} ({_size(per_step)} a step x "
+                f"{steps + 1} steps, uncompressed; contacts estimated at "
+                f"{ROWS_PER_MOVING:g} points per moving body)",
+                file=sys.stderr,
+            )
         if not args.quiet and sys.stderr.isatty():
             from tqdm import tqdm
 
@@ -301,6 +313,14 @@ def cmd_run(args: argparse.Namespace) -> int:
         )
         return 3 if kind == "error" else 130
     return 0
+
+
+def _size(n: float) -> str:
+    """A byte count as a person reads it (kB, MB, GB: powers of 1000)."""
+    for unit, scale in (("GB", 1e9), ("MB", 1e6), ("kB", 1e3)):
+        if n >= scale:
+            return f"{n / scale:.3g} {unit}"
+    return f"{int(n)} B"
 
 
 def batch_size(n_bodies: int) -> int:
