@@ -132,10 +132,22 @@ def plan_cpus(writers: int) -> tuple[set[int], list[set[int]]] | None:
     return set(allowed) - set(writer_cpus), plan
 
 
-def choose_offload(writers: int, cpus: int | None = None, load: float | None = None) -> str:
+# a recording expected to be smaller than this is written by a thread even on an idle machine:
+# writer processes took 3.4-4.0 s to start and 0.9-1.9 s to finish on the loaded 2-core machine
+# (a thread 0.08 s and 0.03 s), more than a short run takes
+SMALL_RUN_BYTES = 200_000_000
+
+
+def choose_offload(
+    writers: int,
+    cpus: int | None = None,
+    load: float | None = None,
+    log_bytes: int | None = None,
+) -> str:
     """What `Recorder(offload="auto")` picks: "process" when the machine has an idle CPU for
     each writer besides the simulation's own (cpus: the CPUs this process may use; load: the
-    one-minute load average, this process included), else "thread".
+    one-minute load average, this process included) and the recording is not small (log_bytes:
+    its expected MCAP size, when known, at least SMALL_RUN_BYTES), else "thread".
 
     Measured on the 2-core machine with two other busy processes (load 5-6), whole recorded
     runs: head_on 20,000 steps MCAP: process 12.6 s, thread 3.8 s, none 16.9 s; default scene
@@ -153,6 +165,8 @@ def choose_offload(writers: int, cpus: int | None = None, load: float | None = N
             load = os.getloadavg()[0]
         except OSError:
             load = float(cpus)
+    if log_bytes is not None and log_bytes < SMALL_RUN_BYTES:
+        return "thread"
     idle = cpus - max(0.0, load - 1.0)  # the load counts this process too
     return "process" if idle >= writers + 1 else "thread"
 

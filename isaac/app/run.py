@@ -180,28 +180,32 @@ def cmd_run(args: argparse.Namespace) -> int:
     try:
         if claims:
             from recorder import Recorder
+            from recorder.frames import ROWS_PER_MOVING_BODY as ROWS_PER_MOVING
+            from recorder.frames import expected_log_bytes
+            from recorder.writer_process import choose_offload
+
+            moving = sum(not b.concrete for b in scene.bodies)
+            per_step, total = expected_log_bytes(sim.n_bodies, moving, steps)
+            if args.mcap:
+                print(
+                    f"expected MCAP log size: about {_size(total)} ({_size(per_step)} a step x "
+                    f"{steps + 1} steps, uncompressed; contacts estimated at "
+                    f"{ROWS_PER_MOVING:g} points per moving body)",
+                    file=sys.stderr,
+                )
+            offload = args.offload
+            if offload == "auto":  # a short run does not wait for writer processes to start
+                offload = choose_offload(len(claims), log_bytes=total)
 
             recorder = Recorder(
                 sim,
                 mcap_path=claims.get("mcap"),
                 rrd_path=claims.get("rrd"),
-                offload=args.offload,
+                offload=offload,
                 compression=args.compression,
             )
             claims = {}  # the recorder owns them now
             recorder.write(first)
-        if args.mcap:
-            from recorder.frames import ROWS_PER_MOVING_BODY as ROWS_PER_MOVING
-            from recorder.frames import expected_log_bytes
-
-            moving = sum(not b.concrete for b in scene.bodies)
-            per_step, total = expected_log_bytes(sim.n_bodies, moving, steps)
-            print(
-                f"expected MCAP log size: about {_size(total)} ({_size(per_step)} a step x "
-                f"{steps + 1} steps, uncompressed; contacts estimated at "
-                f"{ROWS_PER_MOVING:g} points per moving body)",
-                file=sys.stderr,
-            )
         if not args.quiet and sys.stderr.isatty():
             from tqdm import tqdm
 

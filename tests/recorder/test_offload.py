@@ -11,18 +11,22 @@ from recorder.writer_process import choose_offload
 
 
 @pytest.mark.parametrize(
-    ("writers", "cpus", "load", "expected"),
+    ("writers", "cpus", "load", "expected", "log_bytes"),
     [
-        (1, 2, 0.2, "process"),  # an idle 2-core machine: one writer has a CPU of its own
-        (2, 2, 0.2, "thread"),  # two writers and the simulation do not fit on 2 CPUs
-        (1, 2, 3.0, "thread"),  # two other busy processes: no idle CPU
-        (2, 8, 2.0, "process"),
-        (2, 8, 7.5, "thread"),
-        (1, 1, 0.0, "thread"),
+        (1, 2, 0.2, "process", None),  # an idle 2-core machine: one writer has a CPU of its own
+        (2, 2, 0.2, "thread", None),  # two writers and the simulation do not fit on 2 CPUs
+        (1, 2, 3.0, "thread", None),  # two other busy processes: no idle CPU
+        (2, 8, 2.0, "process", None),
+        (2, 8, 7.5, "thread", None),
+        (1, 1, 0.0, "thread", None),
+        (1, 8, 0.0, "thread", 10_000_000),  # a short run: writer processes take seconds to start
+        (1, 8, 0.0, "process", 500_000_000),
     ],
 )
-def test_auto_takes_processes_only_with_an_idle_cpu_for_each_writer(writers, cpus, load, expected):
-    assert choose_offload(writers, cpus=cpus, load=load) == expected
+def test_auto_takes_processes_only_with_an_idle_cpu_for_each_writer_on_a_long_run(
+    writers, cpus, load, expected, log_bytes
+):
+    assert choose_offload(writers, cpus=cpus, load=load, log_bytes=log_bytes) == expected
 
 
 @pytest.mark.parametrize("offload", ["auto", "process", "thread", "none"])
