@@ -59,7 +59,9 @@ def small_log(path: Path, *, compression: str = "none", steps: int = STEPS) -> P
 
 
 def abandoned_log(path: Path, *, steps: int) -> Path:
-    """What a SIGKILL leaves after ``steps`` steps (flushed chunks, no summary): the .partial."""
+    """What a SIGKILL leaves after ``steps`` steps (flushed chunks, no summary): the .partial.
+    steps < 0: killed before its first chunk (the recorder writes step 0 as it starts, so the
+    file is cut back to what came before that chunk: header, schemas, metadata)."""
     sim = Simulation(load_scene_text(TINY, source="<tiny>"))
     rec = Recorder(sim, mcap_path=str(path), flush_every=FLUSH_EVERY, offload="none")
     if steps >= 0:
@@ -67,7 +69,14 @@ def abandoned_log(path: Path, *, steps: int) -> Path:
         for r in sim.run(steps):
             rec.write(r)
     rec._abandon()
-    return Path(str(path) + ".partial")
+    partial = Path(str(path) + ".partial")
+    if steps < 0:
+        data = partial.read_bytes()
+        at = 8  # past the magic: records are opcode (1 byte), length (uint64 LE), content
+        while at < len(data) and data[at] != 0x06:  # 0x06: a Chunk
+            at += 9 + struct.unpack_from("<Q", data, at + 1)[0]
+        partial.write_bytes(data[:at])
+    return partial
 
 
 @dataclass(frozen=True)
