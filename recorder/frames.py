@@ -324,3 +324,34 @@ def model_table(model) -> dict:
             )
         },
     }
+
+
+def write_batch_to(writer, batch, model, gravity) -> int:
+    """The steps of an `isaac.engine.records.StepBatch` into an in-process
+    `recorder.mcap_writer.McapLogWriter` (one whose ``takes_batches``): their frames packed by
+    one compiled call (`recorder.pack.pack_frames`, the writer processes' encoder, with the
+    /stats sums), then written as a writer process writes them. model: ``mass``, ``inertia``,
+    ``concrete`` arrays; gravity: (gx, gy) m/s^2. Returns how many steps were written: all, or
+    those before the first one holding a NaN or an infinity."""
+    from recorder.pack import HEAD_BYTES, frame_sizes_of, pack_frames
+
+    sizes = frame_sizes_of(batch.first, batch.angle.shape[1], batch.offsets, HEAD_BYTES)
+    buf = np.empty(int(sizes[:, 2].sum()), dtype=np.uint8)
+    done = pack_frames(
+        buf, 0, 0, batch.steps, batch.first, batch.dt, sizes, batch.offsets, batch.position,
+        batch.angle, batch.velocity, batch.angular_velocity, batch.exists, *batch.row_arrays,
+        np.ascontiguousarray(model.mass, dtype=np.float64),
+        np.ascontiguousarray(model.inertia, dtype=np.float64),
+        np.ascontiguousarray(model.concrete, dtype=bool), *gravity,
+    )  # fmt: skip
+    at = 0
+    with memoryview(buf) as view:
+        for s in range(done):
+            size = int(sizes[s, 2])
+            frame = Frame(view[at : at + size])
+            writer.write_messages(
+                frame.step, frame.time, frame.exists(), frame.bodies, frame.contacts,
+                {**frame.stats, "state_hash": frame.state_hash()},
+            )  # fmt: skip
+            at += size
+    return done

@@ -343,42 +343,9 @@ class McapLogWriter:
 
     @property
     def takes_batches(self) -> bool:
-        """Whether `write_batch` may be used: not with a writer thread (it takes records) nor
-        with /foxglove/scene (drawn from records)."""
+        """Whether whole step batches may be written (`recorder.frames.write_batch_to`): not
+        with a writer thread (it takes records) nor with /foxglove/scene (drawn from records)."""
         return self._queue is None and self.foxglove is None and sys.byteorder == "little"
-
-    def write_batch(self, batch, gravity) -> int:
-        """Append the steps of an `isaac.engine.records.StepBatch`: their frames packed by one
-        compiled call (`recorder.pack.pack_frames`, the writer processes' encoder, with the
-        /stats sums), then written as a writer process writes them. gravity: (gx, gy) m/s^2.
-        Returns how many steps were written: all, or those before the first one holding a NaN
-        or an infinity."""
-        from recorder.frames import Frame
-        from recorder.pack import HEAD_BYTES, frame_sizes_of, pack_frames
-
-        if self._error is not None:
-            raise LogError(f"writing {self.partial_path} failed: {self._error}")
-        sizes = frame_sizes_of(batch.first, batch.angle.shape[1], batch.offsets, HEAD_BYTES)
-        buf = np.empty(int(sizes[:, 2].sum()), dtype=np.uint8)
-        m = self.model
-        done = pack_frames(
-            buf, 0, 0, batch.steps, batch.first, batch.dt, sizes, batch.offsets,
-            batch.position, batch.angle, batch.velocity, batch.angular_velocity, batch.exists,
-            *batch.row_arrays, np.ascontiguousarray(m.mass, dtype=np.float64),
-            np.ascontiguousarray(m.inertia, dtype=np.float64),
-            np.ascontiguousarray(m.concrete, dtype=bool), *gravity,
-        )  # fmt: skip
-        at = 0
-        with memoryview(buf) as view:
-            for s in range(done):
-                size = int(sizes[s, 2])
-                frame = Frame(view[at : at + size])
-                self.write_messages(
-                    frame.step, frame.time, frame.exists(), frame.bodies, frame.contacts,
-                    {**frame.stats, "state_hash": frame.state_hash()},
-                )  # fmt: skip
-                at += size
-        return done
 
     def _count(self, step: int, exists: np.ndarray) -> tuple[bool, bool]:
         """Note one more step: whether existence changed (a ``/world`` message is due) and

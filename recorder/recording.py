@@ -305,7 +305,14 @@ class Recorder:
             for s in range(batch.steps):
                 self.write(batch.record(s))
             return
-        sent = [w.write_batch(batch, self.gravity) for w in writers]
+        from recorder.frames import write_batch_to
+
+        sent = [
+            w.write_batch(batch)
+            if hasattr(w, "write_batch")
+            else write_batch_to(w, batch, self.model, self.gravity)
+            for w in writers
+        ]
         good = min(sent)
         if good:
             self.steps_written += good

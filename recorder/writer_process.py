@@ -308,12 +308,11 @@ class WriterProcess:
 
     takes_batches = True  # `write_batch`
 
-    def write_batch(self, batch, gravity=None) -> int:
+    def write_batch(self, batch) -> int:
         """Hand the steps of a `isaac.engine.records.StepBatch` to the child, their MCAP frames
         packed by one compiled call per stretch of the ring (`recorder.pack.pack_frames`) rather
-        than one call per step (gravity: unused, the child has it). Returns how many steps were
-        sent: all of them, or the steps before the first one holding a NaN or an infinity (the
-        caller says which)."""
+        than one call per step. Returns how many steps were sent: all of them, or the steps
+        before the first one holding a NaN or an infinity (the caller says which)."""
         if self.kind == "rerun" or not self._compiled:
             for s in range(batch.steps):
                 if not self.write(batch.record(s)):
