@@ -15,6 +15,8 @@ from __future__ import annotations
 import numba
 import numpy as np
 
+from isaac.engine import kernel_cache  # noqa: F401  (first: keys the kernels' numba cache)
+
 SWEEP_INDEX_ROWS = 6  # live, order, spare, body, per, slot (find_pairs scratch)
 RUN = 16  # _stable_order insertion-sorts runs of this many elements before merging
 

@@ -12,6 +12,7 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
+from isaac.engine import kernel_cache  # noqa: F401  (first: keys the kernels' numba cache)
 from isaac.engine.records import StepRecord, state_hash  # noqa: F401 - re-exported
 
 

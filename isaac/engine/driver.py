@@ -34,6 +34,7 @@ from typing import NamedTuple
 import numba
 import numpy as np
 
+from isaac.engine import kernel_cache  # noqa: F401  (first: keys the kernels' numba cache)
 from isaac.engine.broad_phase import find_pairs, speculative_reach
 from isaac.engine.geometry import transform
 from isaac.engine.integrate import (

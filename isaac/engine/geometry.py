@@ -6,6 +6,7 @@ import numba
 import numpy as np
 
 from isaac import trig
+from isaac.engine import kernel_cache  # noqa: F401  (first: keys the kernels' numba cache)
 
 # determinism: the step's own sin/cos (isaac/trig.py: IEEE basic operations only), compiled; the
 # same bits as the pure-Python function the scene layer calls, on any machine (libm's last bit

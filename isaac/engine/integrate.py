@@ -19,6 +19,8 @@ from __future__ import annotations
 import numba
 import numpy as np
 
+from isaac.engine import kernel_cache  # noqa: F401  (first: keys the kernels' numba cache)
+
 PI = np.pi
 TWO_PI = 2.0 * np.pi
 

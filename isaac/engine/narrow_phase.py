@@ -28,6 +28,8 @@ from __future__ import annotations
 import numba
 import numpy as np
 
+from isaac.engine import kernel_cache  # noqa: F401  (first: keys the kernels' numba cache)
+
 # Two clipped points count as one face-face contact when their depths differ by less than this
 # fraction of their distance (edges within about 1e-3 rad of parallel).
 PARALLEL_TOLERANCE = 1e-3

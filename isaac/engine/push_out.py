@@ -16,6 +16,8 @@ from __future__ import annotations
 
 import numba
 
+from isaac.engine import kernel_cache  # noqa: F401  (first: keys the kernels' numba cache)
+
 FULL = 0
 PARTIAL = 1
 NONE = 2

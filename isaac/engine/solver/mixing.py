@@ -5,6 +5,8 @@ from __future__ import annotations
 import numba
 import numpy as np
 
+from isaac.engine import kernel_cache  # noqa: F401  (first: keys the kernels' numba cache)
+
 RULE_MAX = 0
 RULE_MIN = 1
 RULE_MEAN = 2

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import numba
 
+from isaac.engine import kernel_cache  # noqa: F401  (first: keys the kernels' numba cache)
 from isaac.engine.solver.schedule import (
     G12,
     GM11,

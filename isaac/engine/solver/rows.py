@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import numba
 
+from isaac.engine import kernel_cache  # noqa: F401  (first: keys the kernels' numba cache)
 from isaac.engine.solver.mixing import combine
 
 # (row_terms takes scalars only: an inlined helper that takes arrays costs an atomic reference

@@ -6,6 +6,8 @@ from __future__ import annotations
 import numba
 import numpy as np
 
+from isaac.engine import kernel_cache  # noqa: F401  (first: keys the kernels' numba cache)
+
 # ---- the sequential solver: several units at a time ---------------------------------------------
 #
 # Every pass visits the solver's units (single points and two-point blocks) in one fixed

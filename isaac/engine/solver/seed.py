@@ -6,6 +6,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
+from isaac.engine import kernel_cache  # noqa: F401  (first: keys the kernels' numba cache)
 from isaac.engine.solver.mixing import combine
 from isaac.engine.solver.rows import apply_bounce_back, row_terms
 

@@ -1,0 +1,78 @@
+"""numba's cache of ISAAC's kernels goes stale when any engine source changes (a cached driver
+holds the code of every stage it calls, and numba checks only the kernel's own file)."""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from isaac.engine import kernel_cache as engine
+from isaac.engine import driver
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def test_an_engine_kernels_cache_stamp_carries_the_sources_key():
+    locator = driver.run_steps_sequential._cache._impl.locator
+    assert type(locator).__name__.startswith("IsaacSources")
+    assert locator.get_source_stamp()[1] == engine.SOURCES_KEY
+
+
+def test_the_sources_key_changes_with_any_engine_file(tmp_path):
+    copy = tmp_path / "isaac"
+    shutil.copytree(ROOT / "isaac", copy, ignore=shutil.ignore_patterns("__pycache__"))
+    assert engine._sources_key(copy) == engine.SOURCES_KEY
+    geometry = copy / "engine" / "geometry.py"
+    geometry.write_text(geometry.read_text() + "\n# an edit\n")
+    assert engine._sources_key(copy) != engine.SOURCES_KEY
+
+
+def test_a_kernel_outside_isaac_keeps_numbas_own_cache(tmp_path):
+    module = tmp_path / "outside.py"
+    module.write_text("import numba\n@numba.njit(cache=True)\ndef f(x):\n    return x + 1\n")
+    sys.path.insert(0, str(tmp_path))
+    try:
+        import outside
+
+        assert outside.f(1) == 2
+        assert not type(outside.f._cache._impl.locator).__name__.startswith("IsaacSources")
+    finally:
+        sys.path.remove(str(tmp_path))
+
+
+PROBE = """
+import json
+from isaac import Simulation, load_scene
+from isaac.engine import driver
+sim = Simulation(load_scene("{scene}"), compile_ahead=False)
+sim.advance(3)
+print(json.dumps(sum(driver.run_steps_seed.stats.cache_hits.values())))
+"""
+
+
+@pytest.mark.slow
+def test_an_edit_to_geometry_alone_recompiles_the_cached_driver(tmp_path):
+    tree = tmp_path / "tree"
+    shutil.copytree(ROOT / "isaac", tree / "isaac", ignore=shutil.ignore_patterns("__pycache__"))
+    env = {**os.environ, "PYTHONPATH": str(tree), "NUMBA_CACHE_DIR": str(tmp_path / "cache")}
+    env.pop("NUMBA_DISABLE_JIT", None)
+    scene = ROOT / "scenes" / "head_on.yaml"  # the seed preset: run_steps_seed
+
+    def hits() -> int:
+        out = subprocess.run(
+            [sys.executable, "-c", PROBE.format(scene=scene)],
+            env=env, cwd=tmp_path, capture_output=True, text=True, timeout=900, check=True,
+        )  # fmt: skip
+        return json.loads(out.stdout.strip().splitlines()[-1])
+
+    assert hits() == 0  # compiled
+    assert hits() == 1  # from the cache
+    geometry = tree / "isaac" / "engine" / "geometry.py"
+    geometry.write_text(geometry.read_text() + "\n# an edit that changes no code\n")
+    assert hits() == 0  # the driver's cache is stale: compiled again
