@@ -35,7 +35,10 @@ _EXPORTS = {
     "LogError": "isaac.errors",
 }
 
-__all__ = ["__version__", *_EXPORTS]
+# modules of the public API, also imported on first use: isaac.sweep.run("sweep.yaml", out=...)
+_MODULES = {"sweep": "isaac.app.sweep"}
+
+__all__ = ["__version__", *_EXPORTS, *_MODULES]
 
 
 def __dir__() -> list[str]:
@@ -44,9 +47,11 @@ def __dir__() -> list[str]:
 
 
 def __getattr__(name: str):
+    import importlib
+
+    if name in _MODULES:
+        return importlib.import_module(_MODULES[name])
     module = _EXPORTS.get(name)
     if module is None:
         raise AttributeError(f"module 'isaac' has no attribute {name!r}")
-    import importlib
-
     return getattr(importlib.import_module(module), name)

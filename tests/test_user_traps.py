@@ -65,3 +65,12 @@ def test_run_is_a_lazy_generator_and_advance_is_eager():
     assert sim.step_index == 10  # one batch of up to 64 steps: run ahead of the records taken
     sim.advance(3)
     assert sim.step_index == 13  # taken before advance returned
+
+
+def test_the_sweep_api_is_isaac_sweep_run():
+    import inspect
+
+    from isaac.app import sweep
+
+    assert isaac.sweep is sweep and "sweep" in dir(isaac)
+    assert list(inspect.signature(isaac.sweep.run).parameters)[:2] == ["sweep_path", "out"]
