@@ -12,8 +12,8 @@ from pathlib import Path
 
 import pytest
 
-from isaac.engine import kernel_cache as engine
 from isaac.engine import driver
+from isaac.engine import kernel_cache as engine
 
 ROOT = Path(__file__).resolve().parents[1]
 
