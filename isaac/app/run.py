@@ -186,7 +186,7 @@ def cmd_run(args: argparse.Namespace) -> int:
 
             moving = sum(not b.concrete for b in scene.bodies)
             per_step, total = expected_log_bytes(sim.n_bodies, moving, steps)
-            if args.mcap:
+            if args.mcap and total >= LONG_RUN_BYTES:  # a long run says first what it will write
                 print(
                     f"expected MCAP log size: about {_size(total)} ({_size(per_step)} a step x "
                     f"{steps + 1} steps, uncompressed; contacts estimated at "
@@ -317,6 +317,10 @@ def cmd_run(args: argparse.Namespace) -> int:
         )
         return 3 if kind == "error" else 130
     return 0
+
+
+# a recording expected to take this much (MCAP, uncompressed) is announced with its size first
+LONG_RUN_BYTES = 50_000_000
 
 
 def _size(n: float) -> str:
