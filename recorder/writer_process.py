@@ -153,7 +153,10 @@ def choose_offload(
     runs: head_on 20,000 steps MCAP: process 12.6 s, thread 3.8 s, none 16.9 s; default scene
     600 steps MCAP + .rrd: process 24.9 s, thread 5.4 s, none 6.5 s; pile MCAP + .rrd: 14.4,
     8.0, 9.1 s. Writer processes pay only when they have CPUs to themselves (the recording
-    bench, on an idle machine: see bench/README.md).
+    bench, on an idle machine: see bench/README.md). On the idle machine (load 0.4) "none" beat
+    "thread" for short runs (head_on 20,000 steps MCAP: 4.6 against 6.1 s; default MCAP + .rrd:
+    3.2 against 3.9 s): the thread takes records one by one, "none" packs whole batches; a
+    thread given the batch path should beat both, and then this choice is to be measured again.
     """
     if cpus is None:
         try:
