@@ -28,6 +28,7 @@ from bench import quality
 from bench.geometry import LocalPolygons
 from bench.peers import make_engine
 from bench.scenes import BenchScene, build
+from isaac.scene.checks import mass_properties
 
 
 def rss_bytes() -> int:
@@ -47,13 +48,6 @@ def warm_engine(engine_name: str) -> None:
     for _ in range(5):
         engine.step()
     engine.poses()
-
-
-def _area(vertices) -> float:
-    """Shoelace area (m^2) of a counter-clockwise polygon."""
-    v = np.asarray(vertices, dtype=float)
-    x, y = v[:, 0], v[:, 1]
-    return float(0.5 * (x @ np.roll(y, -1) - y @ np.roll(x, -1)))
 
 
 def measure_quality(bench: BenchScene, polys: LocalPolygons, start: tuple, engine) -> dict:
@@ -99,7 +93,7 @@ def measure_quality(bench: BenchScene, polys: LocalPolygons, start: tuple, engin
     elif bench.kind == "off_centre":
         # no gravity: the bodies' total linear momentum is conserved (kg m/s)
         vel, _ = engine.velocities()
-        mass = np.array([b.density * _area(b.vertices) for b in bench.scene.bodies])
+        mass = mass_properties(bench.scene.bodies).mass
         q["momentum_error_kgmps"] = float(
             np.hypot(*((mass[:, None] * (vel - start[2])).sum(axis=0)))
         )

@@ -326,24 +326,39 @@ def model_table(model) -> dict:
     }
 
 
-def write_batch_to(writer, batch, model, gravity) -> int:
-    """The steps of an `isaac.engine.records.StepBatch` into an in-process
-    `recorder.mcap_writer.McapLogWriter` (one whose ``takes_batches``): their frames packed by
-    one compiled call (`recorder.pack.pack_frames`, the writer processes' encoder, with the
-    /stats sums), then written as a writer process writes them. model: ``mass``, ``inertia``,
-    ``concrete`` arrays; gravity: (gx, gy) m/s^2. Returns how many steps were written: all, or
-    those before the first one holding a NaN or an infinity."""
-    from recorder.pack import HEAD_BYTES, frame_sizes_of, pack_frames
+def batch_frame_sizes(batch) -> np.ndarray:
+    """(steps, 3) int64: each step's Bodies bytes, Contacts bytes and frame bytes (a multiple
+    of 8) for an `isaac.engine.records.StepBatch`, as `frame_sizes` gives them one at a time."""
+    from recorder.pack import HEAD_BYTES, frame_sizes_of
 
-    sizes = frame_sizes_of(batch.first, batch.angle.shape[1], batch.offsets, HEAD_BYTES)
-    buf = np.empty(int(sizes[:, 2].sum()), dtype=np.uint8)
-    done = pack_frames(
-        buf, 0, 0, batch.steps, batch.first, batch.dt, sizes, batch.offsets, batch.position,
+    return frame_sizes_of(batch.first, batch.angle.shape[1], batch.offsets, HEAD_BYTES)
+
+
+def pack_batch(buf, pos: int, lo: int, hi: int, batch, sizes, model, gravity) -> int:
+    """Steps lo .. hi - 1 of a `StepBatch` as consecutive MCAP frames from byte ``pos`` of
+    ``buf`` (uint8), by one compiled call (`recorder.pack.pack_frames`, with the /stats sums).
+    sizes: `batch_frame_sizes`; model: ``mass``, ``inertia``, ``concrete`` arrays; gravity:
+    (gx, gy) m/s^2. Returns the first step holding a NaN or an infinity, or hi."""
+    from recorder.pack import pack_frames
+
+    return pack_frames(
+        buf, pos, lo, hi, batch.first, batch.dt, sizes, batch.offsets, batch.position,
         batch.angle, batch.velocity, batch.angular_velocity, batch.exists, *batch.row_arrays,
         np.ascontiguousarray(model.mass, dtype=np.float64),
         np.ascontiguousarray(model.inertia, dtype=np.float64),
         np.ascontiguousarray(model.concrete, dtype=bool), *gravity,
     )  # fmt: skip
+
+
+def write_batch_to(writer, batch, model, gravity) -> int:
+    """The steps of an `isaac.engine.records.StepBatch` into an in-process
+    `recorder.mcap_writer.McapLogWriter` (one whose ``takes_batches``): their frames packed by
+    `pack_batch`, the writer processes' encoder, then written as a writer process writes them.
+    Returns how many steps were written: all, or those before the first one holding a NaN or
+    an infinity."""
+    sizes = batch_frame_sizes(batch)
+    buf = np.empty(int(sizes[:, 2].sum()), dtype=np.uint8)
+    done = pack_batch(buf, 0, 0, batch.steps, batch, sizes, model, gravity)
     at = 0
     with memoryview(buf) as view:
         for s in range(done):

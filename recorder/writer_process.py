@@ -61,8 +61,10 @@ from isaac.errors import LogError
 from recorder.frames import (
     FRAME_HEAD,
     Frame,
+    batch_frame_sizes,
     frame_sizes,
     pack,
+    pack_batch,
     pack_into,
     put_stats,
     read_rerun_frame,
@@ -321,11 +323,8 @@ class WriterProcess:
                 if not self.write(batch.record(s)):
                     return s
             return batch.steps
-        from recorder.pack import HEAD_BYTES, frame_sizes_of, pack_frames
-
-        sizes = frame_sizes_of(batch.first, batch.angle.shape[1], batch.offsets, HEAD_BYTES)
+        sizes = batch_frame_sizes(batch)
         ends = np.cumsum(sizes[:, 2])
-        model = self._stats_model
         lo = 0
         while lo < batch.steps:
             if sizes[lo, 2] > self.capacity:  # too large for the ring: the one-step path
@@ -341,12 +340,9 @@ class WriterProcess:
                 hi -= 1
             total = int(ends[hi - 1] - base)
             pos, end = self._reserve(total)
-            done = pack_frames(
-                self._ring_u8, pos, lo, hi, batch.first, batch.dt, sizes, batch.offsets,
-                batch.position, batch.angle, batch.velocity, batch.angular_velocity,
-                batch.exists, *batch.row_arrays, model.mass, model.inertia, model.concrete,
-                *self._gravity,
-            )  # fmt: skip
+            done = pack_batch(
+                self._ring_u8, pos, lo, hi, batch, sizes, self._stats_model, self._gravity
+            )
             at, head = pos, end - total
             for s in range(lo, done):
                 size = int(sizes[s, 2])

@@ -679,12 +679,10 @@ class Stepper:
         self._last_start = None
         taken = 0
         while True:
-            status, done, carried, body, field, need, table, last_carried = self.kernel(
-                self.bodies, self.settings, pose, self.scratch, self.carry, self.saved_pose,
-                self.saved_carry, batch, self.work.solver_table, taken, self.carried,
-                state.step, k - taken, record,
+            status, done, carried, body, field, need, last_carried = self._call(
+                pose, self.carry, (self.saved_pose, self.saved_carry), batch, taken,
+                self.carried, state.step, k - taken, record,
             )  # fmt: skip
-            self.work.solver_table = table
             self.carried = carried
             state.step += done
             taken += done
@@ -701,6 +699,18 @@ class Stepper:
                     self._rows_per_step = max(4, -(-int(at) // taken))
                 return taken, body, field, batch if record else None
 
+    def _call(self, pose, carry, saved, batch, start, carried, first, k, record) -> tuple:
+        """One call of the compiled driver with this stepper's bundles (`run_steps_sequential`
+        says what each argument is; saved: the (pose, carry) to undo a step with), keeping the
+        solver table it hands back. Returns (status, steps taken, carried, body, field, needed,
+        carried at the start of the last step)."""
+        status, done, carried, body, field, need, table, last_carried = self.kernel(
+            self.bodies, self.settings, pose, self.scratch, carry, saved[0], saved[1], batch,
+            self.work.solver_table, start, carried, first, k, record,
+        )  # fmt: skip
+        self.work.solver_table = table
+        return status, done, carried, body, field, need, last_carried
+
     def redo_last(self, state) -> tuple | None:
         """The batch (one step) of the last step the last `run` took, computed again from its
         starting state, which the driver left in the saved pose and carry: `Simulation.advance`
@@ -716,11 +726,9 @@ class Stepper:
         spare_carry = tuple(np.empty_like(a) for a in carry)
         batch = self.new_batch(1)
         while True:
-            status, done, _, _, _, need, table, _ = self.kernel(
-                self.bodies, self.settings, pose, self.scratch, carry, spare_pose, spare_carry,
-                batch, self.work.solver_table, 0, carried, first, 1, True,
-            )  # fmt: skip
-            self.work.solver_table = table
+            status, _, _, _, _, need, _ = self._call(
+                pose, carry, (spare_pose, spare_carry), batch, 0, carried, first, 1, True
+            )
             if status == NEED_ROWS:
                 batch = _grown_rows(batch, need)
                 continue
