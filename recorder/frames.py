@@ -277,7 +277,8 @@ class Frame:
             velocity=values(2, "<f8", (n, 2)),
             angular_velocity=values(3, "<f8", (n,)),
             exists=exists,
-            contacts=Contacts(**c),
+            # the frame carries no pair depth (the /contacts message of format 1 has none)
+            contacts=Contacts(**c, pair_depth=np.full(m, np.nan)),
         )
 
 
@@ -339,11 +340,13 @@ def pack_batch(buf, pos: int, lo: int, hi: int, batch, sizes, model, gravity) ->
     ``buf`` (uint8), by one compiled call (`recorder.pack.pack_frames`, with the /stats sums).
     sizes: `batch_frame_sizes`; model: ``mass``, ``inertia``, ``concrete`` arrays; gravity:
     (gx, gy) m/s^2. Returns the first step holding a NaN or an infinity, or hi."""
+    from isaac.engine.records import CONTACT_FIELDS
     from recorder.pack import pack_frames
 
     return pack_frames(
         buf, pos, lo, hi, batch.first, batch.dt, sizes, batch.offsets, batch.position,
-        batch.angle, batch.velocity, batch.angular_velocity, batch.exists, *batch.row_arrays,
+        batch.angle, batch.velocity, batch.angular_velocity, batch.exists,
+        *(a for f, a in zip(CONTACT_FIELDS, batch.row_arrays) if f != "pair_depth"),
         np.ascontiguousarray(model.mass, dtype=np.float64),
         np.ascontiguousarray(model.inertia, dtype=np.float64),
         np.ascontiguousarray(model.concrete, dtype=bool), *gravity,

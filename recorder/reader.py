@@ -228,6 +228,7 @@ def contacts_from_message(msg: dict) -> Contacts:
         point=v("point"),
         normal=v("normal"),
         depth=f("depth"),
+        pair_depth=np.full(m, np.nan),  # not in format 1 logs
         push_a=v("push_a"),
         push_b=v("push_b"),
         impulse=f("impulse"),

@@ -165,7 +165,8 @@ class Batch(NamedTuple):
     slot: np.ndarray
     point: np.ndarray  # (rows, 2)
     normal: np.ndarray
-    depth: np.ndarray
+    depth: np.ndarray  # m, the point's own penetration
+    pair_depth: np.ndarray  # m, the pair's MTD depth
     push_a: np.ndarray
     push_b: np.ndarray
     impulse: np.ndarray
@@ -409,6 +410,7 @@ def keep_rows(batch, at, work, rows, substep):
         batch.normal[q, 0] = work.normal[k, 0]
         batch.normal[q, 1] = work.normal[k, 1]
         batch.depth[q] = work.depth[k]
+        batch.pair_depth[q] = work.pair_depth[k]
         batch.push_a[q, 0] = work.push_a[k, 0]
         batch.push_a[q, 1] = work.push_a[k, 1]
         batch.push_b[q, 0] = work.push_b[k, 0]
@@ -662,8 +664,8 @@ class Stepper:
                 np.empty(rows, dtype=np.int32), np.empty(rows, dtype=np.int32),
                 np.empty(rows, dtype=np.int32), np.empty(rows, dtype=np.int32),
                 np.empty(rows, dtype=np.int32), np.empty((rows, 2)), np.empty((rows, 2)),
-                np.empty(rows), np.empty((rows, 2)), np.empty((rows, 2)), np.empty(rows),
-                np.empty(rows), np.empty(rows),
+                np.empty(rows), np.empty(rows), np.empty((rows, 2)), np.empty((rows, 2)),
+                np.empty(rows), np.empty(rows), np.empty(rows),
             )
         )  # fmt: skip
 

@@ -4,8 +4,9 @@ Conventions used by every field below (and by the log format, docs/log-format.md
 - SI units: m, kg, s, rad. World frame: x right, y up. Angles counter-clockwise.
 - Bodies are indexed 0..n-1 in scene order (generators already expanded).
 - A contact row is one contact *point* between bodies ``a < b``. ``normal`` is a unit vector that
-  points from body a towards body b. ``depth`` is the penetration (m, >= 0; negative only for a
-  speculative contact, where it is minus the gap). The impulse ``j`` (N·s, >= 0) was applied as
+  points from body a towards body b. ``depth`` is the point's own penetration and
+  ``pair_depth`` the pair's MTD depth (m, >= 0; negative only for a speculative contact, where it
+  is minus the gap). The impulse ``j`` (N·s, >= 0) was applied as
   ``-j * normal`` to a and ``+j * normal`` to b at ``point``; ``tangent_impulse`` (N·s, signed,
   along ``tangent = (-normal_y, normal_x)``) likewise ``-jt * tangent`` to a and ``+jt * tangent``
 to b.
@@ -32,6 +33,7 @@ CONTACT_FIELDS = (
     "point",
     "normal",
     "depth",
+    "pair_depth",
     "push_a",
     "push_b",
     "impulse",
@@ -52,7 +54,12 @@ class Contacts:
     slot: (m,) int32, 0 or 1: which point of the pair's manifold (only 0 with one-point contacts).
     point: (m, 2) world contact point (m) on the incident body's surface after the push-out.
     normal: (m, 2) unit normal, from a towards b.
-    depth: (m,) penetration at this point before the push-out (m).
+    depth: (m,) this point's own penetration before the push-out (m): how far the point lies
+        behind the reference face along ``normal`` (negative: the gap of a speculative point).
+    pair_depth: (m,) the pair's MTD depth before the push-out (m): the minimum overlap of the two
+        bodies along ``normal`` found by SAT, the same on every row of a pair, what the push-out
+        resolves. It can exceed ``depth`` (a face-face point at the middle of the overlapping
+        segment lies less deep than the deepest vertex) or differ in sign from it.
     push_a, push_b: (m, 2) push-out displacement applied to a and b (m, world); zero when slot > 0.
     impulse: (m,) normal impulse j >= 0 (N·s).
     tangent_impulse: (m,) friction impulse along the tangent (N·s); 0 when friction is off.
@@ -67,6 +74,7 @@ class Contacts:
     point: np.ndarray
     normal: np.ndarray
     depth: np.ndarray
+    pair_depth: np.ndarray
     push_a: np.ndarray
     push_b: np.ndarray
     impulse: np.ndarray
@@ -88,7 +96,7 @@ class Contacts:
         i = np.zeros(0, dtype=np.int32)
         f = np.zeros(0, dtype=np.float64)
         v = np.zeros((0, 2), dtype=np.float64)
-        return Contacts(i, i, i, i, i, v, v, f, v, v, f, f, f)
+        return Contacts(i, i, i, i, i, v, v, f, f, v, v, f, f, f)
 
 
 @dataclass(frozen=True, eq=False)

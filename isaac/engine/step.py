@@ -151,6 +151,7 @@ class Workspace:
             point=self.point[:rows].copy(),
             normal=self.normal[:rows].copy(),
             depth=self.depth[:rows].copy(),
+            pair_depth=self.pair_depth[:rows].copy(),
             push_a=self.push_a[:rows].copy(),
             push_b=self.push_b[:rows].copy(),
             impulse=self.impulse[:rows].copy(),

@@ -78,6 +78,7 @@ def make_contacts(rng, n: int, m: int) -> Contacts:
         point=rng.normal(0, 5, (m, 2)),
         normal=normal,
         depth=rng.uniform(0, 0.01, m),
+        pair_depth=rng.uniform(0, 0.01, m),
         push_a=push_a,
         push_b=-push_a,
         impulse=rng.uniform(0, 2, m),
