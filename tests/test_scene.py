@@ -287,9 +287,12 @@ def test_analytic_block_is_kept_as_plain_data():
 def test_every_world_setting_and_body_key_is_documented():
     doc = (Path(__file__).resolve().parent.parent / "docs" / "scene-format.md").read_text()
     world_fields = [f.name for f in dataclasses.fields(WorldSettings)]
-    body_keys = [f.name for f in dataclasses.fields(BodySpec) if f.name != "vertices"]
+    # a body's vertices and circle radius are its `shape:`, documented under Shapes
+    shapes = ("vertices", "circle")
+    body_keys = [f.name for f in dataclasses.fields(BodySpec) if f.name not in shapes]
     missing = [k for k in world_fields + body_keys + ["shape"] if f"| `{k}` |" not in doc]
     assert missing == []
+    assert "* `{circle: {radius: R}}`" in doc
     assert all(set(p) <= set(world_fields) for p in PRESETS.values())
 
 

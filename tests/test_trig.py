@@ -102,9 +102,11 @@ def test_the_engine_rotates_by_the_own_sin_cos():
     aabb = np.zeros((n, 4))
     exists = np.ones(n, dtype=np.bool_)
     count = np.full(n, 4, dtype=np.int64)
+    radius = np.full(n, 0.7)
     geometry.transform(
-        position, angles, exists, vertices_local, normals_local, count, vertices, normals, aabb
-    )
+        position, angles, exists, vertices_local, normals_local, count, radius, vertices,
+        normals, aabb,
+    )  # fmt: skip
     for i, a in enumerate(angles):
         s, c = trig.sin_cos(float(a))
         for k, (lx, ly) in enumerate(local.tolist()):

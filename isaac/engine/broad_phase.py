@@ -1,7 +1,8 @@
 """Broad phase: candidate pairs whose bounding circles (the seed's MaxDist) and boxes overlap.
 
 Sort-and-sweep along x over existing bodies, so a step costs O(n log n + k) rather than the seed's
-O(n^2) nested loop. Concrete-concrete pairs and absent bodies are skipped.
+O(n^2) nested loop. Concrete-concrete pairs, absent bodies and (with filters) the pairs the
+collision filter keeps apart are skipped.
 
 determinism: the sweep order comes from a stable (merge) sort and the pairs found are then sorted
 by (a, b) with a < b, so the output order depends only on the body indices and boxes.
@@ -15,7 +16,11 @@ from __future__ import annotations
 import numba
 import numpy as np
 
+from isaac import collision_filter
 from isaac.engine import kernel_cache  # noqa: F401  (first: keys the kernels' numba cache)
+
+# the scene's rule, compiled (a pure function of integers)
+collides = numba.njit(cache=True, nogil=True, inline="always")(collision_filter.collides)
 
 SWEEP_INDEX_ROWS = 6  # live, order, spare, body, per, slot (find_pairs scratch)
 RUN = 16  # _stable_order insertion-sorts runs of this many elements before merging
@@ -23,13 +28,15 @@ RUN = 16  # _stable_order insertion-sorts runs of this many elements before merg
 
 @numba.njit(cache=True, nogil=True)
 def find_pairs(
-    position, radius, aabb, expand, movable, exists, pair_a, pair_b, pair_spare, sweep_index,
-    sweep_key, sweep_table,
+    position, radius, aabb, expand, movable, exists, filtered, category, mask, group, pair_a,
+    pair_b, pair_spare, sweep_index, sweep_key, sweep_table,
 ):  # fmt: skip
     """Write candidate pairs (a < b, sorted by (a, b)) into pair_a / pair_b.
 
     position: (n, 2) m; radius: (n,) bounding radius (m); aabb: (n, 4) world boxes (m);
     expand: (n,) extra margin (m) for speculative contacts (0 without ccd); movable: (n,) bool.
+    filtered: whether to apply the collision filter (category, mask, group: (n,) int64,
+    isaac.collision_filter) to the pairs that pass the tests; False skips it.
     Scratch, contents on entry unused: pair_spare (like pair_a), sweep_index
     (SWEEP_INDEX_ROWS, n + 1) int64, sweep_key (n,) and sweep_table (n, 8) float64 (a step
     allocates nothing here: for a few bodies the allocations were most of the broad phase's
@@ -98,8 +105,10 @@ def find_pairs(
                 | (moving + t[q, 7] == 0.0)
                 | (dx * dx + dy * dy > both * both)
             )
+            j = body[q]
+            if filtered and not skip:
+                skip = not collides(category[i], mask[i], group[i], category[j], mask[j], group[j])
             if count < capacity:
-                j = body[q]
                 pair_a[count] = min(i, j)
                 pair_b[count] = max(i, j)
             count += 0 if skip else 1

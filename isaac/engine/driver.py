@@ -66,6 +66,9 @@ class Bodies(NamedTuple):
     movable: np.ndarray  # (n,) bool, not concrete
     enters_at: np.ndarray  # (n,) s
     leaves_at: np.ndarray  # (n,) s, inf when never
+    category: np.ndarray  # (n,) int64, the collision filter (isaac.collision_filter)
+    mask: np.ndarray  # (n,) int64
+    group: np.ndarray  # (n,) int64
 
 
 class Pose(NamedTuple):
@@ -145,6 +148,7 @@ class Settings(NamedTuple):
     gravity_reach: float
     hysteresis: bool
     timed: bool
+    filtered: bool  # whether any body has a collision filter (else none is tested)
 
 
 class Batch(NamedTuple):
@@ -197,6 +201,7 @@ def before_impulses(bodies, cfg, pose, work, carry, carried):
         bodies.vertices_local,
         bodies.normals_local,
         bodies.vertex_count,
+        bodies.radius,
         work.vertices,
         work.normals,
         work.aabb,
@@ -217,6 +222,10 @@ def before_impulses(bodies, cfg, pose, work, carry, carried):
         work.expand,
         bodies.movable,
         pose.exists,
+        cfg.filtered,
+        bodies.category,
+        bodies.mask,
+        bodies.group,
         work.pair_a,
         work.pair_b,
         work.pair_spare,
@@ -589,6 +598,9 @@ class Stepper:
                 work.movable,
                 model.enters_at,
                 model.leaves_at,
+                model.category,
+                model.mask,
+                model.group,
             )
         )
         s = settings
@@ -601,6 +613,7 @@ class Stepper:
                 float(s.restitution_threshold), bool(s.friction_on), int(s.friction_rule),
                 np.asarray(s.gravity_dv, dtype=np.float64), float(s.look_ahead),
                 float(s.gravity_reach), bool(s.hysteresis), bool(model.timed),
+                bool(model.filtered),
             )
         )  # fmt: skip
         self.kernel = run_steps_seed if s.seed_solver else run_steps_sequential

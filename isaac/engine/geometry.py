@@ -16,13 +16,15 @@ sin_cos = numba.njit(cache=True, nogil=True)(trig.sin_cos)
 
 @numba.njit(cache=True, nogil=True)
 def transform(
-    position, angle, exists, vertices_local, normals_local, vertex_count, vertices, normals, aabb
-):
+    position, angle, exists, vertices_local, normals_local, vertex_count, radius, vertices,
+    normals, aabb,
+):  # fmt: skip
     """Fill world vertices (n, V, 2), world edge normals (n, V, 2) and AABBs (n, 4) in place.
 
     Counter-clockwise rotation: x_world = x + cos(a) lx - sin(a) ly, y_world = y + sin(a) lx +
-    cos(a) ly (the seed's code). aabb rows are (min x, min y, max x, max y) in m. Bodies that do
-    not exist are skipped (their rows keep stale values and are never read).
+    cos(a) ly (the seed's code). aabb rows are (min x, min y, max x, max y) in m; a circle's
+    (vertex_count 1: its centre) is its centre +- radius (m). Bodies that do not exist are
+    skipped (their rows keep stale values and are never read).
     """
     n = position.shape[0]
     for i in range(n):
@@ -50,6 +52,12 @@ def transform(
             lo_y = min(lo_y, y)
             hi_x = max(hi_x, x)
             hi_y = max(hi_y, y)
+        if vertex_count[i] == 1:
+            r = radius[i]
+            lo_x -= r
+            lo_y -= r
+            hi_x += r
+            hi_y += r
         aabb[i, 0] = lo_x
         aabb[i, 1] = lo_y
         aabb[i, 2] = hi_x

@@ -14,13 +14,15 @@ from __future__ import annotations
 
 def _sources_key(package_root) -> str:
     """sha256 (hex, 16 digits) of the sources every engine kernel may compile in: the files
-    of isaac/engine and isaac/trig.py, by relative path and content."""
+    of isaac/engine, isaac/trig.py and isaac/collision_filter.py, by relative path and
+    content."""
     import hashlib
     from pathlib import Path
 
     root = Path(package_root)
     h = hashlib.sha256()
-    for path in sorted([*(root / "engine").rglob("*.py"), root / "trig.py"]):
+    shared = [root / "trig.py", root / "collision_filter.py"]
+    for path in sorted([*(root / "engine").rglob("*.py"), *shared]):
         h.update(path.relative_to(root).as_posix().encode())
         h.update(b"\0")
         h.update(path.read_bytes())

@@ -1,5 +1,7 @@
 """Narrow phase: Separating Axis Theorem over both polygons' edge normals, with contact points.
 
+(Pairs with a circle go to isaac.engine.circles.)
+
 For each candidate pair (a, b) this finds:
 - the minimum translation distance (MTD): the edge normal of a or b along which the polygons
   overlap least (the seed's method). For convex polygons the overlap along a's edge normal n_i is
@@ -29,6 +31,7 @@ import numba
 import numpy as np
 
 from isaac.engine import kernel_cache  # noqa: F401  (first: keys the kernels' numba cache)
+from isaac.engine.circles import round_contact
 
 # Two clipped points count as one face-face contact when their depths differ by less than this
 # fraction of their distance (edges within about 1e-3 rad of parallel).
@@ -173,6 +176,34 @@ def collide_pairs(
                 )
                 + margin_extra
             )
+        if ca == 1 or cb == 1:  # a circle (a scene of polygons never takes this branch)
+            touching, px, py, nx, ny, depth, feature = round_contact(
+                vertices, normals, vertex_count, radius, a, b, margin
+            )
+            if touching:
+                _emit(
+                    rows,
+                    a,
+                    b,
+                    feature,
+                    0,
+                    px,
+                    py,
+                    nx,
+                    ny,
+                    depth,
+                    depth,
+                    c_a,
+                    c_b,
+                    c_feature,
+                    c_slot,
+                    c_point,
+                    c_normal,
+                    c_depth,
+                    c_pair_depth,
+                )
+                rows += 1
+            continue
         sep_a, edge_a = max_separation(vertices, normals, a, ca, b, cb)
         if sep_a > margin:
             continue

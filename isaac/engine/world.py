@@ -16,7 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from isaac.scene import Scene, polygon
+from isaac.scene import Scene, circle, polygon
 
 
 @dataclass(frozen=True, eq=False)
@@ -27,11 +27,14 @@ class Model:
     vertices_local: (n, V, 2) vertices (m) in the body frame, centred on the centre of mass,
         counter-clockwise; rows past vertex_count[i] repeat the last vertex (padding).
     normals_local: (n, V, 2) outward unit normal of edge k (vertex k to k+1), body frame.
-    vertex_count: (n,) int64 number of vertices of each body (3..50).
-    radius: (n,) the seed's MaxDist: largest distance from centre of mass to a vertex (m).
+    vertex_count: (n,) int64 number of vertices of each body (3..50), or 1 for a circle: a
+        circle is its centre (one vertex at the centre of mass) with a radius, the
+        point-with-radius form of Box2D v3 (its normals are unused).
+    radius: (n,) the seed's MaxDist: largest distance from centre of mass to a vertex (m); a
+        circle's radius.
     thickness: (n,) the polygon's smallest width (m): over its edges, the largest depth of the
-        polygon behind the edge, minimised. Tolerances that must stay below a body's size (the
-        push-out's slop) are capped by it.
+        polygon behind the edge, minimised; a circle's diameter. Tolerances that must stay below
+        a body's size (the push-out's slop) are capped by it.
     mass: (n,) kg, area * density (also for concrete bodies, for information).
     inertia: (n,) kg m^2 about the centre of mass.
     inv_mass, inv_inertia: (n,) 1/kg, 1/(kg m^2); 0 for concrete bodies.
@@ -41,6 +44,9 @@ class Model:
     enters_at, leaves_at: (n,) s; the body exists while enters_at <= step * dt < leaves_at
         (leaves_at is +inf for a body that never leaves).
     timed: whether any body enters after time 0 or ever leaves (existence can change).
+    category, mask, group: (n,) int64, the collision filter (isaac.collision_filter).
+    filtered: whether any body's filter is not the default (else the broad phase tests none).
+    circles: whether any body is a circle (else no circle code runs).
     """
 
     names: tuple[str, ...]
@@ -59,6 +65,11 @@ class Model:
     enters_at: np.ndarray
     leaves_at: np.ndarray
     timed: bool
+    category: np.ndarray
+    mask: np.ndarray
+    group: np.ndarray
+    filtered: bool
+    circles: bool
 
     @property
     def n_bodies(self) -> int:
@@ -107,6 +118,7 @@ def build_model(scene: Scene) -> Model:
     """Mass properties and padded geometry of every body of a validated scene."""
     n = len(scene.bodies)
     width = max((len(b.vertices) for b in scene.bodies), default=3)
+    width = max(width, 1)  # a scene of circles only
     verts = np.zeros((n, width, 2))
     normals = np.zeros((n, width, 2))
     count = np.zeros(n, dtype=np.int64)
@@ -115,6 +127,17 @@ def build_model(scene: Scene) -> Model:
     mass = np.zeros(n)
     inertia = np.zeros(n)
     for i, body in enumerate(scene.bodies):
+        if body.circle is not None:
+            r = float(body.circle)
+            area, second_moment = circle.mass_properties(r)
+            verts[i] = 0.0
+            normals[i] = (1.0, 0.0)
+            count[i] = 1
+            radius[i] = r
+            thickness[i] = 2.0 * r
+            mass[i] = float(area) * body.density
+            inertia[i] = float(second_moment) * body.density
+            continue
         raw = np.asarray(body.vertices, dtype=np.float64)
         area, centroid, second_moment = polygon.mass_properties(raw)
         local = raw - centroid
@@ -161,6 +184,11 @@ def build_model(scene: Scene) -> Model:
         enters_at=enters_at,
         leaves_at=leaves_at,
         timed=bool(np.any(enters_at > 0.0) or np.any(np.isfinite(leaves_at))),
+        category=np.array([b.category for b in scene.bodies], dtype=np.int64),
+        mask=np.array([b.mask for b in scene.bodies], dtype=np.int64),
+        group=np.array([b.group for b in scene.bodies], dtype=np.int64),
+        filtered=any(b.filtered for b in scene.bodies),
+        circles=any(b.circle is not None for b in scene.bodies),
     )
 
 

@@ -21,11 +21,13 @@ from typing import NamedTuple
 
 import numpy as np
 
-from isaac.scene import polygon
+from isaac.scene import circle, polygon
 from isaac.scene.limits import (
+    FILTER_BITS,
     MAX_COORDINATE,
     MAX_DENSITY,
     MAX_FRICTION,
+    MAX_GROUP,
     MAX_NAME_LENGTH,
     MAX_SIZE,
     MAX_SPEED,
@@ -83,11 +85,37 @@ def _normal(x: np.ndarray) -> np.ndarray:
         return np.isfinite(x) & (np.abs(x) >= MIN_NORMAL)
 
 
+def survey(bodies) -> polygon.PolygonFacts:
+    """`polygon.survey` of every body's shape: polygons from their vertices; a circle's extent is
+    its diameter, its largest coordinate its radius, its area and second moment those of
+    `circle.mass_properties`. A body with both vertices and a circle radius (or neither) has a
+    problem."""
+    circles = [i for i, b in enumerate(bodies) if b.circle is not None]
+    if not circles:
+        return polygon.survey([b.vertices for b in bodies])
+    facts = polygon.survey([() if b.circle is not None else b.vertices for b in bodies])
+    index = np.array(circles)
+    with np.errstate(all="ignore"):
+        radius = np.array([float(bodies[i].circle) for i in circles], dtype=np.float64)
+        area, second = circle.mass_properties(radius)
+        facts.extents[index] = 2.0 * radius
+        facts.largest_coordinates[index] = radius
+    facts.areas[index] = area
+    facts.second_moments[index] = second
+    for i in circles:
+        facts.problems[i] = (
+            "a body is a polygon or a circle: it has vertices and a circle radius"
+            if len(bodies[i].vertices)
+            else None
+        )
+    return facts
+
+
 def mass_properties(bodies, facts: polygon.PolygonFacts | None = None) -> MassProperties:
     """Mass and inertia of every body of `bodies` (concrete ones too), bit for bit what the
     engine's model holds before it zeroes the inverses of concrete bodies."""
     if facts is None:
-        facts = polygon.survey([b.vertices for b in bodies])
+        facts = survey(bodies)
     density = np.fromiter((b.density for b in bodies), dtype=np.float64, count=len(bodies))
     with np.errstate(all="ignore"):
         return MassProperties(
@@ -111,7 +139,7 @@ def first_problem(bodies) -> Problem | None:
     n = len(bodies)
     if n == 0:
         return None
-    facts = polygon.survey([b.vertices for b in bodies])
+    facts = survey(bodies)
     bad = np.zeros(n, dtype=bool)
     bad |= np.fromiter((not valid_name(b.name) for b in bodies), dtype=bool, count=n)
     bad |= np.array([p is not None for p in facts.problems])
@@ -135,6 +163,7 @@ def first_problem(bodies) -> Problem | None:
     with np.errstate(invalid="ignore"):
         bad |= given & ~((leaves > columns["enters_at"]) & (leaves <= MAX_TIME))
     bad |= np.fromiter((not isinstance(b.concrete, bool) for b in bodies), dtype=bool, count=n)
+    bad |= np.fromiter((_filter_problem(b) is not None for b in bodies), dtype=bool, count=n)
     props = mass_properties(bodies, facts)
     with np.errstate(all="ignore"):
         for x in (props.mass, props.inertia, 1.0 / props.mass, 1.0 / props.inertia):
@@ -144,6 +173,16 @@ def first_problem(bodies) -> Problem | None:
         return None
     i = int(failing[0])
     return Problem(i, *_why(bodies[i], facts, i, props))
+
+
+def _filter_problem(body: BodySpec) -> tuple[str, str] | None:
+    """(field, one line) when the body's collision filter is not whole numbers in range."""
+    hi = 2**FILTER_BITS - 1
+    for field, lo, top in (("category", 0, hi), ("mask", 0, hi), ("group", -MAX_GROUP, MAX_GROUP)):
+        value = getattr(body, field)
+        if isinstance(value, bool) or not isinstance(value, int) or not lo <= value <= top:
+            return field, f"{field} {value!r} must be a whole number in {lo}..{top}"
+    return None
 
 
 def _why(body: BodySpec, facts: polygon.PolygonFacts, i: int, props: MassProperties):
@@ -179,6 +218,9 @@ def _why(body: BodySpec, facts: polygon.PolygonFacts, i: int, props: MassPropert
         )
     if not isinstance(body.concrete, bool):
         return "concrete", f"expected true or false, got {body.concrete!r}"
+    filter_problem = _filter_problem(body)
+    if filter_problem is not None:
+        return filter_problem
     mass, inertia = float(props.mass[i]), float(props.inertia[i])
     area, second = float(props.area[i]), float(props.second_moment[i])
     return "mass", (

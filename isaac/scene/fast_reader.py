@@ -10,9 +10,11 @@ loader runs on an expanded scene (isaac.scene.checks.first_problem).
 The result is the Scene the YAML reader gives for the same text, or None when the text is not
 the writer's form line for line (then the YAML reader reads it). A body that matches but does
 not pass the checks is read again, alone, by the YAML reader, so its message is the one the
-YAML reader gives, with its line. The accepted form is strict: each line exactly as the writer
-writes it, numbers as `repr(float)` writes them (a "." or an exponent) or, for a time the
-author wrote as a fraction, as written (`1/120`), names without escapes other than \\" and \\\\.
+YAML reader gives, with its line. A body with a collision filter (three more lines) is not in
+this form: such scenes go through the YAML reader. The accepted form is strict: each line
+exactly as the writer writes it, numbers as `repr(float)` writes them (a "." or an exponent)
+or, for a time the author wrote as a fraction, as written (`1/120`), names without escapes
+other than \\" and \\\\.
 """
 
 from __future__ import annotations
@@ -36,9 +38,11 @@ _NAME = r'"((?:[^"\\\n]|\\["\\])*)"'
 _HEAD = re.compile(
     rf"name: {_QUOTED}\nworld:\n(?:  [a-z_]+: (?:{_QUOTED}|[-+./0-9a-z_]+|{_PAIR})\n)*bodies:\n"
 )
+_POLYGON = rf"polygon: \[({_PAIR}(?:, {_PAIR}){{2,{MAX_VERTICES - 1}}})\]"
+_CIRCLE = rf"circle: \{{radius: ({_F})\}}"
 _BODY = re.compile(
     rf"""  - name: {_NAME}
-    shape: \{{polygon: \[({_PAIR}(?:, {_PAIR}){{2,{MAX_VERTICES - 1}}})\]\}}
+    shape: \{{(?:{_POLYGON}|{_CIRCLE})\}}
     position: \[({_F}), ({_F})\]
     angle: ({_F})
     velocity: \[({_F}), ({_F})\]
@@ -150,15 +154,20 @@ def _time(text: str, path: str, fractions: list) -> float:
 
 
 def _body(found: re.Match, index: int, fractions: list) -> BodySpec:
-    (name, vertices, px, py, angle, vx, vy, spin, density, restitution, friction, concrete,
-     enters_at, leaves_at) = found.groups()  # fmt: skip
+    (name, vertices, radius, px, py, angle, vx, vy, spin, density, restitution, friction,
+     concrete, enters_at, leaves_at) = found.groups()  # fmt: skip
     if "\\" in name:
         name = _ESCAPE.sub(r"\1", name)
-    # the match has checked every number and bracket: splitting is enough
-    numbers = map(float, vertices.replace("[", "").replace("]", "").split(", "))
+    if vertices is None:
+        shape = ()
+    else:
+        # the match has checked every number and bracket: splitting is enough
+        numbers = map(float, vertices.replace("[", "").replace("]", "").split(", "))
+        shape = tuple(zip(numbers, numbers))
     return BodySpec(
         name=name,
-        vertices=tuple(zip(numbers, numbers)),
+        vertices=shape,
+        circle=None if radius is None else float(radius),
         position=(float(px), float(py)),
         angle=float(angle),
         velocity=(float(vx), float(vy)),

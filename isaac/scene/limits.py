@@ -13,7 +13,8 @@ from __future__ import annotations
 MAX_VERTICES = 50  # the seed's LocalSpaceList[50][2]
 MAX_BODIES = 100_000
 MAX_COORDINATE = 1e9  # m: bound on |position| and on |vertex coordinate| (in the body's frame)
-MIN_SIZE, MAX_SIZE = 1e-6, 1e6  # m: box sides, regular radius, polygon extent (bbox diagonal)
+MIN_SIZE, MAX_SIZE = 1e-6, 1e6  # m: box sides, regular radius, polygon extent (bbox diagonal),
+# circle diameter
 MAX_SPEED = 1e6  # m/s and rad/s
 MAX_TIME = 1e9  # s: enters_at / leaves_at
 MAX_DENSITY = 1e9  # kg/m^2
@@ -23,6 +24,8 @@ MAX_ITERATIONS = 1000
 MAX_SUBSTEPS = 1000
 MAX_GRAVITY = 1e4  # m/s^2 per component
 MAX_NAME_LENGTH = 200
+FILTER_BITS = 32  # collision filter: category and mask are whole numbers of this many bits
+MAX_GROUP = 2**31 - 1  # collision filter group, in [-MAX_GROUP, MAX_GROUP]
 MAX_PYRAMID_ROWS = 446  # 446 * 447 / 2 = 99,681 boxes: the largest pyramid under MAX_BODIES
 PILE_CONTAINER_BODIES = 3  # floor, left and right wall
 MAX_PILE_COUNT = MAX_BODIES - PILE_CONTAINER_BODIES

@@ -17,11 +17,13 @@ from pathlib import Path
 from isaac.errors import SceneError
 from isaac.scene import checks, fast_reader, generators, polygon
 from isaac.scene.limits import (
+    FILTER_BITS,
     MAX_BODIES,
     MAX_COORDINATE,
     MAX_DENSITY,
     MAX_FRICTION,
     MAX_GRAVITY,
+    MAX_GROUP,
     MAX_ITERATIONS,
     MAX_NAME_LENGTH,
     MAX_PILE_COUNT,
@@ -48,7 +50,7 @@ from isaac.scene.reader import (
     shown,
 )
 from isaac.scene.settings import DEFAULT_PRESET, PRESETS, WorldSettings
-from isaac.scene.spec import BodySpec, Scene, SceneMarks
+from isaac.scene.spec import DEFAULT_CATEGORY, DEFAULT_MASK, BodySpec, Scene, SceneMarks
 
 # --- world ----------------------------------------------------------------------------------
 
@@ -120,6 +122,9 @@ _BODY_KEYS = (
     "concrete",
     "enters_at",
     "leaves_at",
+    "category",
+    "mask",
+    "group",
 )
 
 
@@ -133,12 +138,26 @@ def _box(width: float, height: float) -> tuple[tuple[float, float], ...]:
     return _vertices_tuple(polygon.box_vertices(width, height))
 
 
-def _read_shape(r: Reader, node, path: str) -> tuple[tuple[float, float], ...]:
-    m = r.mapping(node, path, ("box", "polygon", "regular"))
+_SHAPES = ("box", "polygon", "regular", "circle")
+
+
+def _read_shape(r: Reader, node, path: str) -> tuple[tuple[tuple[float, float], ...], float | None]:
+    """(vertices, circle radius or None) of a body's `shape:`."""
+    m = r.mapping(node, path, _SHAPES)
     if len(m) != 1:
-        raise r.fail("give exactly one of box, polygon, regular", node, path)
+        raise r.fail(f"give exactly one of {', '.join(_SHAPES)}", node, path)
     kind, (_, value) = next(iter(m.items()))
     path = join_path(path, kind)
+    if kind == "circle":
+        c = r.mapping(value, path, ("radius",))
+        if "radius" not in c:
+            raise r.fail("missing key 'radius'", value, path)
+        # the diameter is the circle's extent, bounded like a polygon's
+        return (), r.number(c["radius"][1], join_path(path, "radius"), MIN_SIZE / 2, MAX_SIZE / 2)
+    return _read_polygon(r, kind, value, path), None
+
+
+def _read_polygon(r: Reader, kind: str, value, path: str) -> tuple[tuple[float, float], ...]:
     if kind == "box":
         return _box(*r.pair(value, path, MIN_SIZE, MAX_SIZE, names="w, h"))
     if kind == "regular":
@@ -185,9 +204,11 @@ def _read_body(r: Reader, node, path: str, index: int) -> BodySpec:
                 m["leaves_at"][1],
                 leaves_path,
             )
+    vertices, circle = _read_shape(r, m["shape"][1], join_path(path, "shape"))
     return BodySpec(
         name=name,
-        vertices=_read_shape(r, m["shape"][1], join_path(path, "shape")),
+        vertices=vertices,
+        circle=circle,
         position=optional(r.pair, m, "position", path, (0.0, 0.0), -MAX_COORDINATE, MAX_COORDINATE),
         angle=optional(r.number, m, "angle", path, 0.0, -MAX_SPEED, MAX_SPEED),
         velocity=optional(r.pair, m, "velocity", path, (0.0, 0.0), -MAX_SPEED, MAX_SPEED),
@@ -200,6 +221,9 @@ def _read_body(r: Reader, node, path: str, index: int) -> BodySpec:
         concrete=optional(r.boolean, m, "concrete", path, False),
         enters_at=enters_at,
         leaves_at=leaves_at,
+        category=optional(r.bits, m, "category", path, DEFAULT_CATEGORY, FILTER_BITS),
+        mask=optional(r.bits, m, "mask", path, DEFAULT_MASK, FILTER_BITS),
+        group=optional(r.integer, m, "group", path, 0, -MAX_GROUP, MAX_GROUP),
     )
 
 

@@ -12,6 +12,10 @@ Outline:
         sharing a cell are candidates, those whose boxes meet are the pairs;
     SAT on those pairs over both polygons' edge normals: depth = the smallest overlap of the
         two projections over all axes (the minimum translation distance, m; <= 0 separated).
+        A circle is its centre (one vertex) with a radius that widens its projections; with
+        circles, the axes from each body's vertices to the other's circle centre are tested
+        too (the axis a circle and a polygon's vertex region need), which for convex shapes
+        keeps the minimum the exact MTD (every axis's overlap is an upper bound of it).
 
 Not the engine's narrow phase (isaac.engine.narrow_phase: numba, hysteresis, contact points):
 these figures describe the scene as written, before its first step.
@@ -39,7 +43,9 @@ class Placement(NamedTuple):
     centre: (n, 2) m, the centre of mass (the scene's `position`).
     lo, hi: (n, 2) m, the bounding box.
     thickness: (n,) m, the smallest width: over the edges, the largest depth of a vertex behind
-        the edge, minimised (isaac.engine.world.build_model computes the same).
+        the edge, minimised (isaac.engine.world.build_model computes the same); a circle's
+        diameter.
+    radius: (n,) m, a circle's radius (its one vertex is its centre), 0 for a polygon.
     """
 
     vertices: np.ndarray
@@ -48,6 +54,7 @@ class Placement(NamedTuple):
     lo: np.ndarray
     hi: np.ndarray
     thickness: np.ndarray
+    radius: np.ndarray
 
 
 def place(bodies) -> Placement:
@@ -61,9 +68,17 @@ def place(bodies) -> Placement:
     positions = itertools.chain.from_iterable(b.position for b in bodies)
     centre = np.fromiter(positions, np.float64, count=2 * n).reshape(n, 2)
     angle = np.fromiter((b.angle for b in bodies), dtype=np.float64, count=n)
+    radius = np.zeros(n)
     groups: dict[int, list[int]] = {}
     for i, b in enumerate(bodies):
-        groups.setdefault(len(b.vertices), []).append(i)
+        if b.circle is not None:
+            radius[i] = b.circle
+        else:
+            groups.setdefault(len(b.vertices), []).append(i)
+    circles = np.flatnonzero(radius > 0.0)
+    vertices[circles] = centre[circles, None, :]
+    normals[circles] = (1.0, 0.0)  # any unit axis: an extra axis changes no minimum
+    thickness[circles] = 2.0 * radius[circles]
     for k in sorted(groups):  # determinism: groups in a fixed order
         index = np.array(groups[k])
         # one flat pass over the coordinates: np.array on nested tuples costs ~3x as much
@@ -97,7 +112,13 @@ def place(bodies) -> Placement:
         )
         thickness[index] = behind.max(axis=2).min(axis=1)
     return Placement(
-        vertices, normals, centre, vertices.min(axis=1), vertices.max(axis=1), thickness
+        vertices,
+        normals,
+        centre,
+        vertices.min(axis=1) - radius[:, None],
+        vertices.max(axis=1) + radius[:, None],
+        thickness,
+        radius,
     )
 
 
@@ -199,17 +220,31 @@ def depths(placed: Placement, a: np.ndarray, b: np.ndarray) -> np.ndarray:
     positive; zero or negative (the gap along the best axis) when they do not overlap."""
     out = np.empty(len(a))
     width = placed.vertices.shape[1]
-    for part in _chunks(len(a), width):
+    rounded = bool(placed.radius.any())
+    for part in _chunks(len(a), 2 * width if rounded else width):
         va, vb = placed.vertices[a[part]], placed.vertices[b[part]]  # (p, width, 2)
-        axes = np.concatenate([placed.normals[a[part]], placed.normals[b[part]]], axis=1)
+        axes = [placed.normals[a[part]], placed.normals[b[part]]]
+        if rounded:
+            axes += [_towards(va, placed.centre[b[part]]), _towards(vb, placed.centre[a[part]])]
+        axes = np.concatenate(axes, axis=1)
         # projections of every vertex on every axis: (p, axes, vertices)
         pa = axes[:, :, None, 0] * va[:, None, :, 0] + axes[:, :, None, 1] * va[:, None, :, 1]
         pb = axes[:, :, None, 0] * vb[:, None, :, 0] + axes[:, :, None, 1] * vb[:, None, :, 1]
-        overlap = np.minimum(pa.max(axis=2), pb.max(axis=2)) - np.maximum(
-            pa.min(axis=2), pb.min(axis=2)
+        ra = placed.radius[a[part], None]
+        rb = placed.radius[b[part], None]
+        overlap = np.minimum(pa.max(axis=2) + ra, pb.max(axis=2) + rb) - np.maximum(
+            pa.min(axis=2) - ra, pb.min(axis=2) - rb
         )
         out[part] = overlap.min(axis=1)
     return out
+
+
+def _towards(v: np.ndarray, centre: np.ndarray) -> np.ndarray:
+    """(p, width, 2) unit axes from each vertex v[k, j] to centre[k]; (1, 0) where they meet."""
+    d = centre[:, None, :] - v
+    length = np.hypot(d[..., 0], d[..., 1])[..., None]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(length > 0.0, d / length, np.array([1.0, 0.0]))
 
 
 def centre_depths(placed: Placement, container: np.ndarray, inner: np.ndarray) -> np.ndarray:
@@ -224,4 +259,9 @@ def centre_depths(placed: Placement, container: np.ndarray, inner: np.ndarray) -
         # n_k . (v_k - p): positive when p is behind edge k
         behind = n[..., 0] * (v[..., 0] - p[:, None, 0]) + n[..., 1] * (v[..., 1] - p[:, None, 1])
         out[part] = behind.min(axis=1)
+    # a circle container: its radius less the centre's distance
+    r = placed.radius[container]
+    ring = r > 0.0
+    d = placed.centre[inner[ring]] - placed.centre[container[ring]]
+    out[ring] = r[ring] - np.hypot(d[:, 0], d[:, 1])
     return out

@@ -36,6 +36,7 @@ from isaac.scene.limits import (
 )
 
 _INT_RE = re.compile(r"[-+]?[0-9]+\Z")
+_HEX_RE = re.compile(r"0[xX][0-9a-fA-F]{1,16}\Z")
 _FLOAT_RE = re.compile(r"[-+]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][-+]?[0-9]+)?\Z")
 _NONFINITE_RE = re.compile(r"[-+]?\.?(?:nan|inf|infinity)\Z", re.IGNORECASE)
 _NULLS = ("null", "~", "")
@@ -410,6 +411,23 @@ class Reader:
             raise self.fail(f"expected a whole number, got {describe(node)}", node, path)
         if not lo <= value <= hi:
             raise self.fail(f"{value} is out of range (must be {lo}..{hi})", node, path)
+        return value
+
+    def bits(self, node, path: str, width: int) -> int:
+        """A whole number of `width` bits (a collision filter's category or mask): decimal, or
+        hexadecimal written `0x...`."""
+        value = scalar(node) if isinstance(node, ScalarNode) else None
+        if isinstance(value, str) and _HEX_RE.match(value):
+            value = int(value, 16)
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise self.fail(
+                f"expected a whole number of {width} bits (e.g. 6 or 0x0006), got {describe(node)}",
+                node,
+                path,
+            )
+        hi = 2**width - 1
+        if not 0 <= value <= hi:
+            raise self.fail(f"{value} is out of range (must be 0..{hi:#x})", node, path)
         return value
 
     def boolean(self, node, path: str) -> bool:

@@ -5,7 +5,11 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import NamedTuple
 
+from isaac.scene.limits import FILTER_BITS
 from isaac.scene.settings import WorldSettings
+
+DEFAULT_CATEGORY = 1
+DEFAULT_MASK = 2**FILTER_BITS - 1  # every category
 
 
 @dataclass(frozen=True)
@@ -16,7 +20,8 @@ class BodySpec:
     vertices: polygon vertices (m) exactly as given (box / regular shapes already turned into
         vertices), counter-clockwise, 3..50 of them, convex. Not yet re-centred: the world builder
         re-centres them on their centroid (the seed's LocalSpaceList is relative to the centre of
-        mass), so the same BodySpec always gives the same bits.
+        mass), so the same BodySpec always gives the same bits. Empty for a circle.
+    circle: the radius (m) of a circle centred on `position`, or None for a polygon.
     position: world position of the centre of mass (m).
     angle: rad, counter-clockwise.
     velocity: m/s, world frame.
@@ -27,6 +32,11 @@ class BodySpec:
     concrete: immovable (infinite mass and inertia), the seed's IsConcrete.
     enters_at: time (s) from which the body exists (the seed's Exist).
     leaves_at: time (s) at which the body stops existing, or None.
+    category: collision filter, the bits (32) that say what the body is.
+    mask: collision filter, the categories it collides with. Two bodies collide when each one's
+        mask has a bit of the other's category (Box2D's rule) ...
+    group: ... unless they share a non-zero group: a positive group always collides, a negative
+        one never (also Box2D's rule, which overrides the bits).
     """
 
     name: str
@@ -41,6 +51,15 @@ class BodySpec:
     concrete: bool = False
     enters_at: float = 0.0
     leaves_at: float | None = None
+    circle: float | None = None
+    category: int = DEFAULT_CATEGORY
+    mask: int = DEFAULT_MASK
+    group: int = 0
+
+    @property
+    def filtered(self) -> bool:
+        """Whether the body's collision filter is not the default (collide with everything)."""
+        return (self.category, self.mask, self.group) != (DEFAULT_CATEGORY, DEFAULT_MASK, 0)
 
 
 class SceneMarks(NamedTuple):

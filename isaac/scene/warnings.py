@@ -38,6 +38,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from isaac.collision_filter import collides
 from isaac.scene import overlaps
 from isaac.scene.checks import mass_properties
 from isaac.scene.reader import shown
@@ -52,6 +53,7 @@ SLOP_SHARE = 0.05
 # either, the count says "at least": only bodies heaped on one another get near them.
 MAX_PAIRS = 2_000_000
 MAX_SAT_PAIRS = 200_000
+_FILTER = ("category", "mask", "group")
 
 
 def scene_warnings(scene: Scene, steps: int | None = None) -> list[str]:
@@ -200,6 +202,10 @@ def _placement(scene: Scene, first: np.ndarray, last: np.ndarray) -> list[str]:
     a, b, complete = overlaps.box_pairs(placed.lo, placed.hi, MAX_PAIRS)
     concrete = np.fromiter((x.concrete for x in bodies), dtype=bool, count=n)
     keep = ~(concrete[a] & concrete[b])  # two concrete bodies never collide
+    if any(x.filtered for x in bodies):  # nor two bodies their filters keep apart
+        f = {k: np.array([getattr(x, k) for x in bodies], dtype=np.int64) for k in _FILTER}
+        cat, mask, group = f["category"], f["mask"], f["group"]
+        keep &= collides(cat[a], mask[a], group[a], cat[b], mask[b], group[b])
     a, b = a[keep], b[keep]
     lines = []
     # a movable body beside a concrete one that exists at the movable body's first step

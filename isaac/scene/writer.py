@@ -62,15 +62,27 @@ def _value(value, written: dict, path: str) -> str:
     return _yaml_value(value)
 
 
-# every field of a body after its name and vertices, in the order the fast reader expects
+# the collision filter's fields, written only for a body whose filter is not the default (so the
+# text of every scene without filters, and every log of one, is what it was before filters)
+_FILTER_FIELDS = ("category", "mask", "group")
+# every other field of a body after its name and shape, in the order the fast reader expects
 _BODY_FIELDS = tuple(
-    f.name for f in dataclasses.fields(BodySpec) if f.name not in ("name", "vertices")
+    f.name
+    for f in dataclasses.fields(BodySpec)
+    if f.name not in ("name", "vertices", "circle", *_FILTER_FIELDS)
 )
+
+
+def _shape(body: BodySpec) -> str:
+    if body.circle is not None:
+        return f"    shape: {{circle: {{radius: {_yaml_value(body.circle)}}}}}"
+    return f"    shape: {{polygon: {_yaml_value(body.vertices)}}}"
 
 
 def scene_to_yaml(scene: Scene) -> str:
     """The expanded scene as YAML text: every world setting and every body explicit (generators
-    already expanded, shapes as `polygon:` of the stored vertices), floats written with `repr`.
+    already expanded, shapes as `polygon:` of the stored vertices or `circle:`), floats written
+    with `repr`; a body's collision filter only when it is not the default.
 
     ``load_scene_text(scene_to_yaml(s), source=s.source)`` equals `s` field by field, bit for
     bit (`source` is not part of the text: it says where a text came from), and writes the same
@@ -88,13 +100,16 @@ def scene_to_yaml(scene: Scene) -> str:
     fields = [(f"    {name}: ", operator.attrgetter(name)) for name in _BODY_FIELDS]
     for index, body in enumerate(scene.bodies):
         add(f"  - name: {_yaml_value(body.name)}")
-        add(f"    shape: {{polygon: {_yaml_value(body.vertices)}}}")
+        add(_shape(body))
         if body_written:
             for (head, get), name in zip(fields, _BODY_FIELDS):
                 add(head + _value(get(body), written, f"bodies[{index}].{name}"))
-            continue
-        for head, get in fields:
-            add(head + _yaml_value(get(body)))
+        else:
+            for head, get in fields:
+                add(head + _yaml_value(get(body)))
+        if body.filtered:
+            for name in _FILTER_FIELDS:
+                add(f"    {name}: {getattr(body, name)}")
     if scene.analytic is not None:
         lines.append(f"analytic: {_yaml_value(scene.analytic)}")
     return "\n".join(lines) + "\n"
