@@ -62,6 +62,58 @@ class BodySpec:
         return (self.category, self.mask, self.group) != (DEFAULT_CATEGORY, DEFAULT_MASK, 0)
 
 
+JOINT_KINDS = ("revolute", "distance", "weld", "prismatic")
+
+
+@dataclass(frozen=True)
+class JointSpec:
+    """One joint as the engine takes it: every value resolved to the bodies' frames at step 0.
+
+    A body's frame has its origin at the body's centre of mass (its `position`) and turns with
+    its angle (counter-clockwise); world-frame anchors and axes of the scene file are turned
+    into it with the body's pose at step 0 (isaac.trig, so the bits are the same everywhere).
+
+    name: unique among the joints.
+    kind: one of JOINT_KINDS.
+    a, b: indices into Scene.bodies, a != b, not both concrete (a joint to a concrete body
+        pins to the world).
+    local_a, local_b: the anchor on each body (m, that body's frame).
+    axis: prismatic only: the slide axis, a unit vector in a's frame; (1, 0) otherwise.
+    reference_angle: angle of b less angle of a (rad) at which the joint is at rest: revolute
+        limits, the weld and the prismatic's locked rotation measure from it.
+    length: distance only: the rest length (m) between the anchors.
+    min_length, max_length: distance only: limits on the length (m), or None.
+    stiffness: distance: a spring of this frequency (Hz) at `length`; weld: an angular spring
+        (Box2D 2.3's soft weld); None for rigid.
+    damping_ratio: of the spring (0 undamped, 1 critical).
+    lower, upper: revolute: angle limits (rad, about reference_angle); prismatic: translation
+        limits along the axis (m, about the anchors' start); None for no limits.
+    motor_speed: revolute (rad/s, counter-clockwise) or prismatic (m/s along the axis) motor
+        target speed, or None for no motor.
+    max_motor: the motor's largest torque (N m) or force (N).
+    collide_connected: whether the two bodies still collide with each other.
+    """
+
+    name: str
+    kind: str
+    a: int
+    b: int
+    local_a: tuple[float, float]
+    local_b: tuple[float, float]
+    axis: tuple[float, float] = (1.0, 0.0)
+    reference_angle: float = 0.0
+    length: float = 0.0
+    min_length: float | None = None
+    max_length: float | None = None
+    stiffness: float | None = None
+    damping_ratio: float = 0.0
+    lower: float | None = None
+    upper: float | None = None
+    motor_speed: float | None = None
+    max_motor: float = 0.0
+    collide_connected: bool = False
+
+
 class SceneMarks(NamedTuple):
     """Where a scene's YAML text said what it says (1-based lines), for warnings.
 
@@ -82,6 +134,7 @@ class Scene:
     name: the scene's name (from the file, or its stem).
     source: where it came from (path or "<text>"), for messages.
     analytic: optional analytic reference the scene declares (used by `isaac tradeoff`), or None.
+    joints: the joints (JointSpec), in the order the scene gives them.
     marks: where the YAML gave each body (SceneMarks), or None (a scene built in Python or read
         from a log's text); never compared, so it does not change what a scene is.
     as_written: (key path, text) of each time the scene gives as a fraction (`world.dt`,
@@ -94,5 +147,6 @@ class Scene:
     bodies: tuple[BodySpec, ...]
     source: str = "<scene>"
     analytic: dict | None = None
+    joints: tuple[JointSpec, ...] = ()
     marks: SceneMarks | None = field(default=None, compare=False, repr=False)
     as_written: tuple[tuple[str, str], ...] = field(default=(), compare=False, repr=False)
