@@ -71,6 +71,13 @@ def cluster():
             yield c, client
 
 
+def _rows_written(rows: Path) -> int:
+    """Rows the workers have written so far (one line each in rows/chunk-*.jsonl)."""
+    if not rows.is_dir():
+        return 0
+    return sum(p.read_text().count("\n") for p in rows.glob("chunk-*.jsonl"))
+
+
 def _comparable(table) -> list[dict]:
     return [{k: v for k, v in r.items() if k not in TIMING_COLUMNS} for r in table.to_pylist()]
 
@@ -263,6 +270,46 @@ def test_a_diverging_run_is_a_failed_row_and_the_others_complete(tmp_path, clust
     assert f"step {k}" in rows[1]["error"] and "'anvil'" in rows[1]["error"]
     assert rows[1]["final_step"] == k - 1  # the last good state
     assert f"failed: run 1: step {k}" in printed
+
+
+def test_the_base_scenes_warnings_are_said_once_for_the_sweeps_steps(tmp_path, cluster, capsys):
+    _, client = cluster
+    _write(
+        tmp_path,
+        """\
+        world: {steps: 100, dt: 0.01}
+        bodies:
+          - {name: ground, shape: {box: [10, 1]}, position: [0, -0.5], concrete: true}
+          - {name: box, shape: {box: [1, 1]}, position: [0, 0.5], friction: 0.9}
+          - {name: late, shape: {box: [1, 1]}, position: [-3, 3], enters_at: 0.5}
+        """,
+        "traps.yaml",
+    )
+    sweep = _write(
+        tmp_path,
+        """\
+        scene: traps.yaml
+        runs:
+          grid:
+            bodies.box.restitution: [0.1, 0.2, 0.3]
+        steps: 10
+        record: none
+        """,
+    )
+    os.environ["DASK_SCHEDULER_ADDRESS"] = client.scheduler.address
+    try:
+        status = main(["sweep", str(sweep), "--out", str(tmp_path / "out"), "--no-plots"])
+    finally:
+        del os.environ["DASK_SCHEDULER_ADDRESS"]
+    assert status == 0
+    said = [line for line in capsys.readouterr().err.splitlines() if "warning:" in line]
+    scene = tmp_path / "traps.yaml"
+    # once for the sweep, not once per run; 'late' enters at 0.5 s, after the sweep's 10 steps
+    # of 0.01 s (the scene's own 100 steps would let it in)
+    assert len(said) == 2, said
+    assert said[0].startswith(f"isaac sweep: warning: {scene}:4: bodies[1].friction: ")
+    assert said[1].startswith(f"isaac sweep: warning: {scene}:5: bodies[2]: ")
+    assert "'late'" in said[1] and "never exists" in said[1]
 
 
 BAD = [
@@ -485,9 +532,7 @@ def test_ctrl_c_stops_cleanly_and_the_same_command_resumes(tmp_path, cluster):
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     rows = out / "rows"
     deadline = time.monotonic() + 300
-    while time.monotonic() < deadline and not (
-        rows.is_dir() and len(list(rows.glob("*.json"))) >= 3
-    ):
+    while time.monotonic() < deadline and _rows_written(rows) < 3:
         time.sleep(0.2)
     workers = _children(proc.pid)
     assert workers
@@ -533,9 +578,7 @@ def test_a_killed_worker_costs_only_its_run(tmp_path, cluster):
     thread.start()
     rows = out / "rows"
     deadline = time.monotonic() + 300
-    while time.monotonic() < deadline and not (
-        rows.is_dir() and len(list(rows.glob("*.json"))) >= 2
-    ):
+    while time.monotonic() < deadline and _rows_written(rows) < 2:
         time.sleep(0.1)
     pids = client.run(os.getpid)
     victim = sorted(pids.values())[0]

@@ -2,15 +2,21 @@
 
 Outline of `execute`:
 
-1. read     the sweep file and its scene; every run's scene checked by the scene loader (bad
-            input: one line, exit 2, before anything runs or is written).
-2. folder   OUT/ made, or found holding this same sweep (resume); the rows of finished runs
-            whose logs are complete are kept, the other runs are to do.
-3. warm up  the kernels of each distinct world setting compiled into numba's on-disk cache once
-            (here for a local cluster, on one worker for a remote one), before the fan-out.
-4. fan out  chunks of runs as Dask tasks (`worker.run_chunk`); rows come back as chunks finish,
-            with a progress bar over runs.
-5. gather   runs.parquet (every row, by index), the PNG plots, and the summary.
+1. read     the sweep file and its scene (its warnings said once); the first PRE_CHECK runs'
+            scenes checked by the scene loader here, so that most bad input is refused (one
+            line, exit 2) before a cluster is asked for.
+2. folder   OUT/ found holding this same sweep (resume: the rows of finished runs whose logs
+            are complete are kept, the other runs are to do), or new.
+3. check    on the cluster: every other run's scene loaded by the scene loader, in chunks
+            (`worker.load_chunk`); the first run refused stops the sweep before anything runs
+            or is written, with the message the loader gives here. The loaded scenes stay on
+            the workers for step 5: each run's scene is read once.
+4. warm up  the kernels of each distinct world setting compiled into numba's on-disk cache once
+            (here for a local cluster, on one worker for a remote one), then loaded by every
+            worker at once, before the fan-out.
+5. fan out  OUT/ written; the same chunks as Dask tasks (`worker.run_chunk`), each next to its
+            loaded scenes; rows come back as chunks finish, with a progress bar over runs.
+6. gather   runs.parquet (every row, by index), the PNG plots, and the summary.
 
 Ctrl-C (or SIGTERM) cancels the tasks, shuts the cluster down and writes the rows finished so
 far; running the same command again resumes.
@@ -26,16 +32,22 @@ import signal
 import sys
 import threading
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 from isaac.app.sweep import worker as work
 from isaac.app.sweep.cluster import start_cluster
-from isaac.app.sweep.spec import Sweep, SweepError, check_runs, load_sweep
+from isaac.app.sweep.spec import Sweep, SweepError, load_runs, load_sweep, refusal
 from isaac.errors import IsaacError
 
-MAX_CHUNK = 20  # runs per task at most: a killed worker's chunk is rescheduled whole
-TASKS_PER_WORKER = 8  # at least this many tasks per worker while runs last (load balance)
+# runs per task at most: a task costs the scheduler about a millisecond, a small run less; a
+# rescheduled chunk redoes only its unfinished runs (their rows are on disk), so chunks may be big
+MAX_CHUNK = 100
+TASKS_PER_WORKER = 4  # at least this many tasks per worker while runs last (load balance)
 MAX_WARM_UP = 8  # distinct world settings compiled before the fan-out (others as they come)
+PRE_CHECK = 32  # runs whose scenes are checked in this process, before any cluster is asked
+# the loaded scenes stay on the workers until their runs are done while the sweep's runs x the
+# base scene's bodies are at most this (about 1 kB a body), else each run loads its own again
+KEEP_SCENES_BODIES = 2_000_000
 
 
 @dataclass
@@ -52,6 +64,10 @@ class SweepResult:
     workers: int
     plots: list | None
     interrupted: bool = False
+    # wall seconds of each step of `execute` (module docstring): read, cluster (started or
+    # reached), check, warm_up, runs (the fan-out, from the first task sent to the last row
+    # back), table, plots
+    phases: dict = field(default_factory=dict)
 
     @property
     def failed(self) -> int:
@@ -116,9 +132,9 @@ def run(sweep_path, out=None, *, client=None, scheduler=None, workers=None, chun
     return result.table
 
 
-def _prepare_out(sweep: Sweep, out: str) -> None:
-    """Make OUT, or check that it holds this sweep (then it is resumed); copy the sweep file
-    and its scene there. SweepError when OUT holds something else."""
+def _check_out(sweep: Sweep, out: str) -> None:
+    """SweepError unless OUT is absent, empty, or holds this same sweep (then it is resumed).
+    Reads only."""
     copy = os.path.join(out, "sweep.yaml")
     scene_copy = os.path.join(out, "scene.yaml")
     if os.path.lexists(out) and not os.path.isdir(out):
@@ -144,6 +160,13 @@ def _prepare_out(sweep: Sweep, out: str) -> None:
                     "only with the same files, or choose another folder",
                     source=sweep.path,
                 )
+
+
+def _prepare_out(sweep: Sweep, out: str) -> None:
+    """Make OUT (checked by `_check_out` first) and copy the sweep file and its scene there."""
+    _check_out(sweep, out)
+    copy = os.path.join(out, "sweep.yaml")
+    scene_copy = os.path.join(out, "scene.yaml")
     try:
         for sub in ("", work.LOGS_DIR, work.TMP_DIR, work.ROWS_DIR):
             os.makedirs(os.path.join(out, sub), exist_ok=True)
@@ -158,24 +181,19 @@ def _prepare_out(sweep: Sweep, out: str) -> None:
         ) from None
 
 
-def _tasks(sweep: Sweep, todo: list[int], out: str, chunk: int) -> list[dict]:
+def _chunks(indices: list[int], size: int) -> list[list[int]]:
+    return [indices[start : start + size] for start in range(0, len(indices), size)]
+
+
+def _tasks(sweep: Sweep, chunks: list[list[int]], out: str) -> list[dict]:
     base = {
         "out": out,
         "record": sweep.record,
         "steps": sweep.steps,
         "metrics": list(sweep.metrics),
         "final_bodies": list(sweep.final_bodies),
-        "scene_path": sweep.scene_path,
-        "scene_name": sweep.scene_name,
     }
-    tasks = []
-    for start in range(0, len(todo), chunk):
-        runs = [
-            {"index": i, "scene_text": sweep.run_scene_text(i), "params": sweep.params(i)}
-            for i in todo[start : start + chunk]
-        ]
-        tasks.append({**base, "runs": runs})
-    return tasks
+    return [{**base, "runs": runs} for runs in chunks]
 
 
 def execute(
@@ -188,10 +206,18 @@ def execute(
     chunk=None,
     progress: bool = False,
     plots: bool = True,
+    warn=None,
 ) -> SweepResult:
-    """Steps 1-5 of the module docstring; see `run`."""
+    """Steps 1-6 of the module docstring; see `run`. `warn`: called with each warning line of
+    the base scene (isaac.scene.warnings), once, before anything runs."""
     started = time.perf_counter()
+    phases: dict[str, float] = {}
     sweep = load_sweep(sweep_path)
+    if warn is not None:
+        from isaac.scene.warnings import scene_warnings
+
+        for line in scene_warnings(sweep.scene, sweep.steps):
+            warn(line)
     remote = client is not None or bool(scheduler or os.environ.get("DASK_SCHEDULER_ADDRESS"))
     out = out or default_out(sweep_path)
     if remote and client is None and not os.path.isabs(out):
@@ -204,36 +230,69 @@ def execute(
         raise IsaacError(f"--workers must be >= 1, got {workers}")
     if chunk is not None and chunk < 1:
         raise IsaacError(f"--chunk must be >= 1, got {chunk}")
-    worlds = check_runs(sweep)
+    pre = load_runs(sweep, range(min(sweep.n_runs, PRE_CHECK)), keep=False)
+    if pre["refused"] is not None:
+        raise refusal(sweep, pre["refused"])
+    phases["read"] = time.perf_counter() - started
     from isaac.app.sweep import table as results  # pyarrow: imported when a sweep runs
 
     out = os.path.abspath(out)
-    _prepare_out(sweep, out)
+    _check_out(sweep, out)
     schema = results.schema(sweep)
-    kept = results.kept_rows(out, sweep.n_runs, schema)
+    kept = results.kept_rows(out, sweep.n_runs, schema) if os.path.isdir(out) else {}
     todo = [i for i in range(sweep.n_runs) if i not in kept]
     done: dict[int, dict] = dict(kept)
     interrupted = False
     n_workers = 0
     if todo:
         interrupted, n_workers = _fan_out(
-            sweep, todo, out, done, worlds, client, scheduler, workers, chunk, progress
+            sweep,
+            todo,
+            out,
+            done,
+            pre["worlds"],
+            client,
+            scheduler,
+            workers,
+            chunk,
+            progress,
+            phases,
         )
+    else:
+        _prepare_out(sweep, out)
     if interrupted:
+        if not os.path.isfile(os.path.join(out, "sweep.yaml")):
+            # stopped before anything ran: nothing to write
+            return SweepResult(
+                table=results.to_table(list(done.values()), schema),
+                sweep=sweep,
+                out=out,
+                kept=len(kept),
+                ran=0,
+                seconds=time.perf_counter() - started,
+                workers=n_workers,
+                plots=None,
+                interrupted=True,
+                phases=phases,
+            )
         # runs that finished after the client stopped listening left their rows on disk
         for i, row in results.kept_rows(out, sweep.n_runs, schema).items():
             done.setdefault(i, row)
+    t0 = time.perf_counter()
     table = results.to_table(list(done.values()), schema)
     results.write(table, out)
+    phases["table"] = time.perf_counter() - t0
     written = None
     if not interrupted:
-        # every row is in the table: the per-run rows and the killed runs' files go
+        # every row is in the table: the per-chunk rows and the killed runs' files go
         shutil.rmtree(os.path.join(out, work.ROWS_DIR), ignore_errors=True)
         shutil.rmtree(os.path.join(out, work.TMP_DIR), ignore_errors=True)
         if plots:
             from isaac.app.sweep.plots import plot_all
 
+            t0 = time.perf_counter()
             written = plot_all(table, sweep, out)
+            phases["plots"] = time.perf_counter() - t0
         else:
             written = []
     return SweepResult(
@@ -246,14 +305,41 @@ def execute(
         workers=n_workers,
         plots=written,
         interrupted=interrupted,
+        phases=phases,
     )
 
 
-def _fan_out(sweep, todo, out, done, worlds, client, scheduler, workers, chunk, progress):
-    """Steps 3 and 4; fills `done` {index: row}. Returns (interrupted, workers used)."""
+def _check_on_cluster(client, sweep_f, sweep, todo_chunks, kept) -> tuple[list, dict]:
+    """Step 3: (futures of the todo chunks' `load_chunk` results, kept on the workers; world
+    settings {repr: first run}). SweepError for the first run refused."""
+    keep = sweep.n_runs * len(sweep.scene.bodies) <= KEEP_SCENES_BODIES
+    # the kept runs (a resume) are checked as well, past the ones checked here already
+    others = [i for i in sorted(kept) if i >= PRE_CHECK]
+    other_chunks = _chunks(others, max(len(c) for c in todo_chunks))
+    n, m = len(todo_chunks), len(other_chunks)
+    loads = client.map(
+        work.load_chunk, todo_chunks, [sweep_f] * n, [keep] * n, pure=False, key="isaac-load"
+    )
+    checks = client.map(
+        work.load_chunk, other_chunks, [sweep_f] * m, [False] * m, pure=False, key="isaac-check"
+    )
+    summaries = client.gather(client.map(work.chunk_summary, loads + checks, pure=False))
+    del checks
+    refused = [s["refused"] for s in summaries if s["refused"] is not None]
+    if refused:
+        raise refusal(sweep, min(refused))
+    worlds: dict = {}
+    for s in summaries:
+        for w, i in s["worlds"].items():
+            worlds[w] = min(i, worlds.get(w, i))
+    return loads, worlds
+
+
+def _fan_out(sweep, todo, out, done, worlds, client, scheduler, workers, chunk, progress, phases):
+    """Steps 3 to 5; fills `done` {index: row} and `phases` (seconds). Returns (interrupted,
+    workers used)."""
     from dask.distributed import as_completed
 
-    warm = [sweep.run_scene_text(i) for i in sorted(worlds.values())[:MAX_WARM_UP]]
     own = client is None
     cluster = None
     bar = None
@@ -262,45 +348,63 @@ def _fan_out(sweep, todo, out, done, worlds, client, scheduler, workers, chunk, 
     n_workers = 0
     try:
         local = own and not (scheduler or os.environ.get("DASK_SCHEDULER_ADDRESS"))
-        if local:
-            # the workers share this machine's numba cache: fill it once, here
-            work.warm_up(warm, sweep.scene_path, sweep.scene_name)
+        t0 = time.perf_counter()
         if own:
             client, cluster = start_cluster(scheduler, workers)
-        if local:
-            # each worker process loads them from the cache now, all at once, rather than
-            # inside its first run
-            client.run(work.warm_up, warm[:1], sweep.scene_path, sweep.scene_name)
-        else:
-            client.submit(
-                work.warm_up, warm, sweep.scene_path, sweep.scene_name, pure=False
-            ).result()
         n_workers = max(1, len(client.scheduler_info().get("workers", {})))
         size = chunk or max(
             1, min(MAX_CHUNK, math.ceil(len(todo) / (n_workers * TASKS_PER_WORKER)))
         )
-        tasks = _tasks(sweep, todo, out, size)
+        chunks = _chunks(todo, size)
+        sweep_f = client.scatter(sweep, broadcast=True, hash=False)
+        phases["cluster"] = (t1 := time.perf_counter()) - t0
+        loads, seen = _check_on_cluster(client, sweep_f, sweep, chunks, set(done))
+        for w, i in seen.items():
+            worlds[w] = min(i, worlds.get(w, i))
+        phases["check"] = (t0 := time.perf_counter()) - t1
+        warm = [sweep.run_scene_text(i) for i in sorted(worlds.values())[:MAX_WARM_UP]]
+        warm_args = (warm, sweep.scene_path, sweep.scene_name, sweep.record)
+        if local:
+            # the workers share this machine's numba cache: fill it once, here
+            work.warm_up(*warm_args)
+        else:
+            client.submit(work.warm_up, *warm_args, pure=False).result()
+        # each worker process loads them from the cache now, all at once, rather than inside
+        # its first run
+        client.run(work.warm_up, *warm_args)
+        _prepare_out(sweep, out)
+        phases["warm_up"] = (t1 := time.perf_counter()) - t0
+        tasks = _tasks(sweep, chunks, out)
         if progress:
             from tqdm import tqdm
 
             bar = tqdm(total=sweep.n_runs, initial=len(done), unit="run", desc=sweep.scene_name)
-        futures = client.map(work.run_chunk, tasks, pure=False)
-        by_future = {f.key: t for f, t in zip(futures, tasks)}
+        futures = client.map(
+            work.run_chunk, tasks, [sweep_f] * len(tasks), loads, pure=False, key="isaac-run"
+        )
+        by_future = {f.key: k for k, f in enumerate(futures)}
+        del loads  # each chunk's scenes go from the worker with its run task
         for future in as_completed(futures):
-            task = by_future[future.key]
+            task = tasks[by_future[future.key]]
             try:
                 rows = future.result()
             except Exception as exc:  # noqa: BLE001 - e.g. KilledWorker: the chunk's runs fail
                 message = " ".join(f"{type(exc).__name__}: {exc}".split())
+                written = {
+                    r["index"]: r
+                    for r in work.read_rows(work.rows_path(out, task["runs"][0]))
+                    if work.row_is_complete(out, r)
+                }
                 rows = [
-                    work.read_row(out, r["index"])
-                    or {"index": r["index"], **r["params"], "status": "failed", "error": message}
-                    for r in task["runs"]
+                    written.get(i)
+                    or {"index": i, **sweep.params(i), "status": "failed", "error": message}
+                    for i in task["runs"]
                 ]
             for row in rows:
                 done[row["index"]] = row
             if bar is not None:
                 bar.update(len(rows))
+        phases["runs"] = time.perf_counter() - t1
     except KeyboardInterrupt:
         interrupted = True
     finally:
@@ -447,6 +551,8 @@ def cmd_sweep(args: argparse.Namespace) -> int:
             chunk=args.chunk,
             progress=not args.quiet and sys.stderr.isatty(),
             plots=not args.no_plots,
+            # the base scene's warnings, once (as isaac check and isaac run say them)
+            warn=lambda line: print(f"isaac sweep: warning: {line}", file=sys.stderr),
         )
     finally:
         for s, h in previous.items():

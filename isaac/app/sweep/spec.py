@@ -61,6 +61,7 @@ class Sweep:
     scene_text: str
     scene_name: str
     root: object  # the base scene's node tree (keys.emit writes each run's text from it)
+    scene: object  # the base scene as loaded (isaac.scene.Scene): its warnings, its bodies
     grid: list[Axis]
     random: list[Axis]
     n_random: int  # samples per grid point (1 without `random:`)
@@ -229,6 +230,7 @@ def load_sweep(path) -> Sweep:
         scene_text=scene_text,
         scene_name=base.name,
         root=scene_root,
+        scene=base,
         grid=grid,
         random=random,
         n_random=n_random,
@@ -371,21 +373,59 @@ def _read_dist(r: Reader, node, path: str) -> tuple:
 # --- every run's scene, checked -------------------------------------------------------------
 
 
-def check_runs(sweep: Sweep, progress=None) -> dict:
-    """Load every run's scene with the scene loader; SweepError naming the run and the key for
-    the first run whose scene is refused. Returns {world settings repr: run index} of the
-    distinct world settings (for compiling their kernels before the fan-out)."""
-    worlds: dict = {}
-    for index in range(sweep.n_runs):
-        text = sweep.run_scene_text(index)
+def load_runs(sweep: Sweep, indices, keep: bool = True) -> dict:
+    """Load the scenes of runs `indices` (in order) with the scene loader, up to the first one it
+    refuses. {"indices": the runs loaded, "scenes": their Scenes (None unless `keep`),
+    "params": their table values, "refused": the index of the first run refused (else None),
+    "worlds": {world settings repr: first run index with them}}. Plain data: a Dask worker
+    returns it, and `refusal` names the refused run's key from it."""
+    scenes: list | None = [] if keep else None
+    done, params, worlds = [], [], {}
+    refused = None
+    for index in indices:
+        draws = sweep.draws(index)
+        values = {(id(a.slot.container), a.slot.key): node for a, node, _ in draws}
+        text = keys.emit(sweep.root, values)
         try:
             scene = load_scene_text(text, source=sweep.scene_path, default_name=sweep.scene_name)
-        except SceneError as exc:
-            raise _run_refusal(sweep, index, exc) from None
+        except SceneError:
+            refused = index
+            break
         worlds.setdefault(repr(scene.world), index)
-        if progress is not None:
-            progress(index)
-    return worlds
+        done.append(index)
+        params.append({axis.key: plain for axis, _, plain in draws})
+        if scenes is not None:
+            scenes.append(scene)
+    return {
+        "indices": done,
+        "scenes": scenes,
+        "params": params,
+        "refused": refused,
+        "worlds": worlds,
+    }
+
+
+def refusal(sweep: Sweep, index: int) -> SweepError:
+    """The SweepError for run `index`, whose scene the loader refuses (loaded again here, so
+    the message is the loader's own wherever the refusal was first found)."""
+    try:
+        load_scene_text(
+            sweep.run_scene_text(index), source=sweep.scene_path, default_name=sweep.scene_name
+        )
+    except SceneError as exc:
+        return _run_refusal(sweep, index, exc)
+    raise AssertionError(f"run {index}'s scene loads: not a refusal")
+
+
+def check_runs(sweep: Sweep, indices=None) -> dict:
+    """Load the scenes of runs `indices` (default every run) with the scene loader; SweepError
+    naming the run and the key for the first run whose scene is refused. Returns {world
+    settings repr: run index} of the distinct world settings (for compiling their kernels
+    before the fan-out)."""
+    loaded = load_runs(sweep, range(sweep.n_runs) if indices is None else indices, keep=False)
+    if loaded["refused"] is not None:
+        raise refusal(sweep, loaded["refused"])
+    return loaded["worlds"]
 
 
 def _run_refusal(sweep: Sweep, index: int, exc: SceneError) -> SweepError:

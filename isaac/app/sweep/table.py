@@ -10,7 +10,7 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from isaac.app.sweep import metrics as metric_columns
-from isaac.app.sweep.worker import ROWS_DIR, read_row, row_is_complete
+from isaac.app.sweep.worker import ROW_FILE_PREFIX, ROWS_DIR, read_rows, row_is_complete
 
 TABLE = "runs.parquet"
 TIMING_COLUMNS = ("wall_time_s", "worker")  # vary from run to run of one sweep
@@ -64,9 +64,14 @@ def _cell(value, type_: pa.DataType):
 def to_table(rows: list[dict], schema_: pa.Schema) -> pa.Table:
     """The rows (sorted by index) as a Table of `schema_`."""
     rows = sorted(rows, key=lambda r: r["index"])
-    columns = {
-        f.name: pa.array([_cell(r.get(f.name), f.type) for r in rows], type=f.type) for f in schema_
-    }
+    columns = {}
+    for f in schema_:
+        values = [r.get(f.name) for r in rows]
+        if (f.type == pa.string() or f.type == pa.float64()) and not all(
+            v is None or type(v) is (str if f.type == pa.string() else float) for v in values
+        ):
+            values = [_cell(v, f.type) for v in values]  # JSON text, ints as floats
+        columns[f.name] = pa.array(values, type=f.type)
     return pa.table(columns, schema=schema_)
 
 
@@ -99,14 +104,15 @@ def kept_rows(out_dir: str, n_runs: int, schema_: pa.Schema) -> dict[int, dict]:
     rows_dir = os.path.join(out_dir, ROWS_DIR)
     if os.path.isdir(rows_dir):
         for name in sorted(os.listdir(rows_dir)):
-            if not (name.startswith("run-") and name.endswith(".json")):
+            if not (name.startswith(ROW_FILE_PREFIX) and name.endswith(".jsonl")):
                 continue
-            try:
-                i = int(name[4:-5])
-            except ValueError:
-                continue
-            if 0 <= i < n_runs and i not in kept:
-                row = read_row(out_dir, i)
-                if row is not None and set(row) == set(schema_.names):
+            for row in read_rows(os.path.join(rows_dir, name)):
+                i = row["index"]
+                if (
+                    0 <= i < n_runs
+                    and i not in kept
+                    and set(row) == set(schema_.names)
+                    and row_is_complete(out_dir, row)
+                ):
                     kept[i] = row
     return kept

@@ -7,12 +7,17 @@ A run's files, in the sweep's output folder:
   renamed there on close). A run killed or interrupted leaves its file here, never under the
   final name.
 - ``logs/run-000123.mcap``: moved there (one rename) once the recorder has closed the file.
-- ``rows/run-000123.json``: the run's row, written (temporary name, then a rename) after its
-  logs are in place. A chunk that Dask runs again after its worker died finds the rows of the
-  runs already done and keeps them: a killed worker costs only the run it was in.
+- ``rows/chunk-000120.jsonl``: the rows of the chunk whose first run is 120, one JSON line per
+  run, each appended (and flushed) after the run's logs are in place. A chunk that Dask runs
+  again after its worker died finds the rows of the runs already done and keeps them: a killed
+  worker costs only the run it was in. A line cut short by a kill is not a row.
 
-The recorder writes in this process (``offload="none"``): one writer process per run would cost
-more than a small run.
+Where a run's time goes is what shapes this module (docs/sweep-format.md, "Speed"): a small run
+simulates in well under a millisecond, so everything per run besides the simulation is kept
+small. Each run's scene is loaded once, by the task that checked it (`load_chunk`, whose
+result Dask keeps on the worker for the chunk's `run_chunk`); the whole run is one compiled
+batch of steps (`batch_size`); its row is one appended line, not a file. The recorder writes in
+this process (``offload="none"``): one writer process per run would cost more than a small run.
 """
 
 from __future__ import annotations
@@ -37,8 +42,13 @@ def log_names(index: int, record: str) -> dict[str, str]:
     return out
 
 
-def row_path(out_dir: str, index: int) -> str:
-    return os.path.join(out_dir, ROWS_DIR, f"run-{index:06d}.json")
+ROW_FILE_PREFIX = "chunk-"
+BATCH_BODY_STEPS = 100_000  # body-steps per batch of records at most (memory per batch)
+
+
+def rows_path(out_dir: str, first: int) -> str:
+    """The row file of the chunk whose first run is `first`."""
+    return os.path.join(out_dir, ROWS_DIR, f"{ROW_FILE_PREFIX}{first:06d}.jsonl")
 
 
 def sha256_of(path: str) -> str:
@@ -65,25 +75,43 @@ def row_is_complete(out_dir: str, row: dict) -> bool:
     return True
 
 
-def read_row(out_dir: str, index: int) -> dict | None:
-    """Run `index`'s row as a finished run left it, or None (absent, unreadable, or its logs
-    not the files it names)."""
+def read_rows(path: str) -> list[dict]:
+    """The rows of row file `path` in the order written (none if it is absent or unreadable;
+    a line that is not a whole JSON row, as a kill mid-write leaves, is skipped)."""
     try:
-        with open(row_path(out_dir, index), encoding="utf-8") as f:
-            row = json.load(f)
-    except (OSError, ValueError):
-        return None
-    if row.get("index") != index or not row_is_complete(out_dir, row):
-        return None
-    return row
+        with open(path, encoding="utf-8") as f:
+            lines = f.read().split("\n")
+    except (OSError, UnicodeDecodeError):
+        return []
+    rows = []
+    for line in lines:
+        try:
+            row = json.loads(line)
+        except ValueError:
+            continue
+        if isinstance(row, dict) and isinstance(row.get("index"), int):
+            rows.append(row)
+    return rows
 
 
-def _write_row(out_dir: str, row: dict) -> None:
-    path = row_path(out_dir, row["index"])
-    tmp = path + ".tmp"
-    with open(tmp, "w", encoding="utf-8") as f:
-        json.dump(row, f)  # floats as repr: exact float64 (NaN as NaN)
-    os.replace(tmp, path)
+class _RowFile:
+    """The row file of one chunk, opened for appending on the first row."""
+
+    def __init__(self, path: str) -> None:
+        self.path = path
+        self.f = None
+
+    def append(self, row: dict) -> None:
+        if self.f is None:
+            self.f = open(self.path, "a", encoding="utf-8")
+            if self.f.tell() > 0:
+                self.f.write("\n")  # a line a killed attempt cut short ends here, alone
+        self.f.write(json.dumps(row) + "\n")  # floats as repr: exact float64 (NaN as NaN)
+        self.f.flush()  # on disk (the page cache) before the next run: a kill loses no row
+
+    def close(self) -> None:
+        if self.f is not None:
+            self.f.close()
 
 
 def _worker_name() -> str:
@@ -95,26 +123,65 @@ def _worker_name() -> str:
         return f"pid {os.getpid()}"
 
 
-def run_chunk(task: dict) -> list[dict]:
-    """The rows of the runs of `task` (see `isaac.app.sweep.command._tasks`), in order."""
+def load_chunk(indices: list[int], sweep, keep: bool) -> dict:
+    """`isaac.app.sweep.spec.load_runs` as a Dask task: the chunk's scenes checked (and kept in
+    the result, which Dask holds on this worker for the chunk's `run_chunk`, when `keep`)."""
+    from isaac.app.sweep.spec import load_runs
+
+    return load_runs(sweep, indices, keep=keep)
+
+
+def chunk_summary(loaded: dict) -> dict:
+    """What the client needs of a `load_chunk` result (not the scenes): runs checked, the first
+    refused, the world settings seen."""
+    return {k: loaded[k] for k in ("indices", "refused", "worlds")}
+
+
+def batch_size(steps: int, n_bodies: int) -> int:
+    """Steps per compiled call: the whole run for small scenes, capped so that a batch's
+    records hold at most BATCH_BODY_STEPS body-steps."""
+    return max(1, min(steps, BATCH_BODY_STEPS // max(1, n_bodies)))
+
+
+def run_chunk(task: dict, sweep, loaded: dict | None = None) -> list[dict]:
+    """The rows of the runs of `task` (see `isaac.app.sweep.command._tasks`), in order.
+    `loaded`: the chunk's `load_chunk` result (scenes and table values), else each run's scene
+    is loaded here."""
+    out_dir, first = task["out"], task["runs"][0]
+    path = rows_path(out_dir, first)
+    # an earlier attempt at this chunk (its worker died): the runs it finished are kept
+    done = {r["index"]: r for r in read_rows(path) if r["index"] in set(task["runs"])}
+    done = {i: r for i, r in done.items() if row_is_complete(out_dir, r)}
+    scenes, params = {}, {}
+    if loaded is not None:
+        params = dict(zip(loaded["indices"], loaded["params"]))
+        if loaded["scenes"] is not None:
+            scenes = dict(zip(loaded["indices"], loaded["scenes"]))
+    worker = _worker_name()
     rows = []
-    for run in task["runs"]:
-        row = read_row(task["out"], run["index"])
-        if row is None:
-            row = run_one(task, run)
-        rows.append(row)
+    file = _RowFile(path)
+    try:
+        for index in task["runs"]:
+            row = done.get(index)
+            if row is None:
+                row = run_one(task, sweep, index, scenes.get(index), params.get(index), worker)
+                file.append(row)
+            rows.append(row)
+    finally:
+        file.close()
     return rows
 
 
-def run_one(task: dict, run: dict) -> dict:
-    """Simulate, measure and (maybe) record one run; its row (status "ok" or "failed")."""
+def run_one(task: dict, sweep, index: int, scene=None, params=None, worker=None) -> dict:
+    """Simulate, measure and (maybe) record run `index`; its row (status "ok" or "failed").
+    `scene`, `params`: the run's loaded scene and table values, when already known."""
     from isaac.app.sweep.metrics import Measure
     from isaac.engine.simulation import Simulation
     from isaac.errors import IsaacError
     from isaac.scene import load_scene_text
 
     started = time.perf_counter()
-    out_dir, index = task["out"], run["index"]
+    out_dir = task["out"]
     names = log_names(index, task["record"])
     tmp = {k: os.path.join(out_dir, TMP_DIR, os.path.basename(v)) for k, v in names.items()}
     steps = task["steps"]
@@ -122,9 +189,12 @@ def run_one(task: dict, run: dict) -> dict:
     recorder = None
     measure = None
     try:
-        scene = load_scene_text(
-            run["scene_text"], source=task["scene_path"], default_name=task["scene_name"]
-        )
+        if scene is None:
+            scene = load_scene_text(
+                sweep.run_scene_text(index),
+                source=sweep.scene_path,
+                default_name=sweep.scene_name,
+            )
         sim = Simulation(scene)
         measure = Measure(sim, task["metrics"], task["final_bodies"])
         if tmp:
@@ -139,7 +209,7 @@ def run_one(task: dict, run: dict) -> dict:
             )
             recorder.write(measure.first)
         n = scene.world.steps if steps is None else steps
-        for batch in sim.batches(n, size=64):
+        for batch in sim.batches(n, size=batch_size(n, len(scene.bodies))):
             if recorder is not None:
                 recorder.write_batch(batch)  # one compiled call packs the batch's MCAP frames
             measure.add(batch)
@@ -167,7 +237,7 @@ def run_one(task: dict, run: dict) -> dict:
                 paths[kind] = rel
         except (OSError, IsaacError) as exc:
             error = error or " ".join(f"could not finish the log: {exc}".split())
-    row = {"index": index, **run["params"]}
+    row = {"index": index, **(sweep.params(index) if params is None else params)}
     if measure is not None:
         row.update(measure.values())
     row["status"] = "ok" if error is None else "failed"
@@ -183,23 +253,42 @@ def run_one(task: dict, run: dict) -> dict:
             sha256_of(os.path.join(out_dir, paths["rrd"])) if "rrd" in paths else None
         )
     row["wall_time_s"] = time.perf_counter() - started
-    row["worker"] = _worker_name()
-    _write_row(out_dir, row)
+    row["worker"] = worker or _worker_name()
     return row
 
 
-def warm_up(scene_texts: list[str], scene_path: str, scene_name: str) -> None:
+def warm_up(scene_texts: list[str], scene_path: str, scene_name: str, record: str = "none"):
     """Compile (or load from numba's on-disk cache) the kernels these scenes' settings use: two
-    steps of each, through the compiled driver. Run once before the fan-out, so the workers,
-    which share the cache on one machine, load the kernels instead of each compiling them."""
+    steps of each, through the compiled driver, and recorded when `record` is not "none" (the
+    recorder packs a batch's frames in compiled code too). Run once before the fan-out, so the
+    workers, which share the cache on one machine, load the kernels instead of each compiling
+    them."""
+    import tempfile
+
     from isaac.engine.simulation import Simulation
-    from isaac.errors import SimulationError
+    from isaac.errors import IsaacError
     from isaac.scene import load_scene_text
 
-    for text in scene_texts:
-        sim = Simulation(load_scene_text(text, source=scene_path, default_name=scene_name))
-        try:
-            for _ in sim.batches(2, size=2):
-                pass
-        except SimulationError:
-            pass
+    with tempfile.TemporaryDirectory(prefix="isaac-sweep-warm-") as tmp:
+        for k, text in enumerate(scene_texts):
+            sim = Simulation(load_scene_text(text, source=scene_path, default_name=scene_name))
+            recorder = None
+            try:
+                if record != "none":
+                    from recorder import Recorder
+
+                    recorder = Recorder(
+                        sim, mcap_path=os.path.join(tmp, f"warm-{k}.mcap"), offload="none"
+                    )
+                    recorder.write(sim.record())
+                for batch in sim.batches(2, size=2):
+                    if recorder is not None:
+                        recorder.write_batch(batch)
+            except IsaacError:
+                pass  # a run that fails at once: its kernels are loaded all the same
+            finally:
+                if recorder is not None:
+                    try:
+                        recorder.close(complete=False, reason="warm-up")
+                    except IsaacError:
+                        pass
