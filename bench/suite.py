@@ -12,7 +12,9 @@ What it does, in order:
    first step, each a whole `python -c` process timed from outside.
 5. Recording overhead (MCAP, Rerun) and replay speed (`bench.recording`), skipped with a note
    while the recorder or the replay command is not there.
-6. Targets (from the issue) against the measurements.
+6. Sweep throughput (`bench.sweep`, in a process of its own): runs/s of `isaac sweep` on 1 and
+   2 workers and where a run's time goes; its targets in its own table.
+7. Targets (from the issue) against the measurements.
 
 Output: bench/results/latest.jsonl (one JSON object a line: `meta`, every `run`, the aggregated
 `row`s, `growth`, `startup`, `recording`, `targets`) and bench/results/latest.md (the tables),
@@ -629,6 +631,7 @@ def parse_args(argv):
     p.add_argument("--reps", type=int, help="repetitions per engine (default 5, quick 2)")
     p.add_argument("--no-startup", action="store_true", help="skip compile / start-up timing")
     p.add_argument("--no-recording", action="store_true", help="skip recording and replay")
+    p.add_argument("--no-sweep", action="store_true", help="skip the sweep throughput")
     p.add_argument("--out", default=str(RESULTS), help="results directory (default: %(default)s)")
     p.add_argument(
         "--no-readme",
@@ -707,11 +710,19 @@ def main(argv: list[str] | None = None) -> int:
             recs.append(recording(preset, reps=5, steps=steps, scene=scene))
             log(f"  recording: {recs[-1]}")
     targets = check_targets(rows, growth_rows, startup_rows, isaac_engines, recs)
+    sweeps = []
+    if not args.no_sweep and not args.quick:
+        from bench import sweep as sweep_bench
+
+        sweeps.append(sweep_bench.run_subprocess(subprocess_env()))
+        log(f"  sweep: {sweeps[-1].get('error') or 'done'}")
 
     meta = meta_info(reps, skipped)
     meta["elapsed_s"] = time.perf_counter() - t_start
     meta["scenes"], meta["engines"] = scenes, engines
     text = markdown(meta, rows, growth_rows, startup_rows, recs, targets)
+    if sweeps:
+        text += "\n" + sweep_bench.markdown(sweeps[0])
 
     # only a full run replaces the published results; a subset goes to partial.*
     full = not (
@@ -721,13 +732,16 @@ def main(argv: list[str] | None = None) -> int:
         or args.reps
         or args.no_startup
         or args.no_recording
+        or args.no_sweep
         or args.presets != ",".join(DEFAULT_PRESETS)
     )
     stem = "latest" if full else "partial"
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     with open(out / f"{stem}.jsonl", "w") as f:
-        for obj in [meta, *runs, *rows, *growth_rows, *startup_rows, *recs, *targets]:
+        sweep_targets = [t for s in sweeps for t in s.get("targets", [])]
+        objs = [meta, *runs, *rows, *growth_rows, *startup_rows, *recs, *targets]
+        for obj in [*objs, *sweeps, *sweep_targets]:
             f.write(json.dumps(obj, default=_json_default) + "\n")
     (out / f"{stem}.md").write_text(text + "\n")
     print(text)

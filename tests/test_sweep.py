@@ -365,6 +365,28 @@ def test_out_of_range_value_names_the_run_and_the_scene_rule(tmp_path, capsys):
     assert f": run {first}: drawn value" in err
 
 
+def test_a_refusal_found_on_the_cluster_is_the_same_and_comes_before_anything(tmp_path, cluster):
+    # run 40 is past the runs checked in this process (PRE_CHECK): the cluster finds it
+    from isaac.app.sweep.command import PRE_CHECK
+    from isaac.app.sweep.spec import SweepError
+
+    _, client = cluster
+    values = [round(0.01 * i, 2) for i in range(60)]
+    values[40], values[50] = 1.5, 2.5
+    assert PRE_CHECK <= 40
+    sweep = _write(
+        tmp_path,
+        f"scene: {SCENES / 'bounce.yaml'}\nruns:\n  grid:\n"
+        f"    bodies.box.restitution: {values}\nrecord: none\n",
+    )
+    with pytest.raises(SweepError) as refused:
+        execute(str(sweep), str(tmp_path / "out"), client=client)
+    said = str(refused.value)
+    assert said.startswith(f"{sweep}:4: runs.grid.bodies.box.restitution: run 40: value 1.5 ")
+    assert "is out of range (must be >= 0.0 and <= 1.0) (scene bodies[1].restitution)" in said
+    assert not (tmp_path / "out").exists()  # nothing ran or was written
+
+
 RANDOM_BAD = [
     (
         "bad distribution",

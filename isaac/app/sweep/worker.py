@@ -114,6 +114,38 @@ class _RowFile:
             self.f.close()
 
 
+class Clock:
+    """Wall seconds of each part of the runs timed with it, summed (bench/sweep.py reports them
+    per run): scene (loading a run's scene, when the run does it itself), build (the
+    Simulation and the metrics' start), simulate (the compiled batches), record (the recorder:
+    open, write, close, rename, sha256), metrics, row (the row's line appended)."""
+
+    PARTS = ("scene", "build", "simulate", "record", "metrics", "row")
+
+    def __init__(self) -> None:
+        self.seconds = dict.fromkeys(self.PARTS, 0.0)
+        self.runs = 0
+        self._t = 0.0
+
+    def start(self) -> None:
+        self._t = time.perf_counter()
+        self.runs += 1
+
+    def lap(self, part: str) -> None:
+        """The time since the last lap (or start) goes to `part`."""
+        t = time.perf_counter()
+        self.seconds[part] += t - self._t
+        self._t = t
+
+
+class _NoClock:
+    def start(self) -> None:
+        pass
+
+    def lap(self, part: str) -> None:
+        pass
+
+
 def _worker_name() -> str:
     try:
         from distributed import get_worker
@@ -143,10 +175,11 @@ def batch_size(steps: int, n_bodies: int) -> int:
     return max(1, min(steps, BATCH_BODY_STEPS // max(1, n_bodies)))
 
 
-def run_chunk(task: dict, sweep, loaded: dict | None = None) -> list[dict]:
+def run_chunk(task: dict, sweep, loaded: dict | None = None, clock=None) -> list[dict]:
     """The rows of the runs of `task` (see `isaac.app.sweep.command._tasks`), in order.
     `loaded`: the chunk's `load_chunk` result (scenes and table values), else each run's scene
-    is loaded here."""
+    is loaded here. `clock`: a `Clock` that times the parts of each run."""
+    clock = clock or _NoClock()
     out_dir, first = task["out"], task["runs"][0]
     path = rows_path(out_dir, first)
     # an earlier attempt at this chunk (its worker died): the runs it finished are kept
@@ -164,22 +197,30 @@ def run_chunk(task: dict, sweep, loaded: dict | None = None) -> list[dict]:
         for index in task["runs"]:
             row = done.get(index)
             if row is None:
-                row = run_one(task, sweep, index, scenes.get(index), params.get(index), worker)
+                row = run_one(
+                    task, sweep, index, scenes.get(index), params.get(index), worker, clock
+                )
                 file.append(row)
+                clock.lap("row")
             rows.append(row)
     finally:
         file.close()
     return rows
 
 
-def run_one(task: dict, sweep, index: int, scene=None, params=None, worker=None) -> dict:
+def run_one(
+    task: dict, sweep, index: int, scene=None, params=None, worker=None, clock=None
+) -> dict:
     """Simulate, measure and (maybe) record run `index`; its row (status "ok" or "failed").
-    `scene`, `params`: the run's loaded scene and table values, when already known."""
+    `scene`, `params`: the run's loaded scene and table values, when already known; `clock`:
+    a `Clock` to time the run's parts with."""
     from isaac.app.sweep.metrics import Measure
     from isaac.engine.simulation import Simulation
     from isaac.errors import IsaacError
     from isaac.scene import load_scene_text
 
+    clock = clock or _NoClock()
+    clock.start()
     started = time.perf_counter()
     out_dir = task["out"]
     names = log_names(index, task["record"])
@@ -195,8 +236,10 @@ def run_one(task: dict, sweep, index: int, scene=None, params=None, worker=None)
                 source=sweep.scene_path,
                 default_name=sweep.scene_name,
             )
+        clock.lap("scene")
         sim = Simulation(scene)
         measure = Measure(sim, task["metrics"], task["final_bodies"])
+        clock.lap("build")
         if tmp:
             from recorder import Recorder
 
@@ -208,11 +251,16 @@ def run_one(task: dict, sweep, index: int, scene=None, params=None, worker=None)
                 replace_partial=True,  # a run killed earlier left it: this run replaces it
             )
             recorder.write(measure.first)
+            clock.lap("record")
         n = scene.world.steps if steps is None else steps
         for batch in sim.batches(n, size=batch_size(n, len(scene.bodies))):
+            clock.lap("simulate")
             if recorder is not None:
                 recorder.write_batch(batch)  # one compiled call packs the batch's MCAP frames
+                clock.lap("record")
             measure.add(batch)
+            clock.lap("metrics")
+        clock.lap("simulate")
     except IsaacError as exc:  # diverged, a non-finite value, a log that cannot be written
         error = " ".join(str(exc).split())
     except Exception as exc:  # noqa: BLE001 - any other failure is this run's row, not the sweep's
@@ -237,9 +285,11 @@ def run_one(task: dict, sweep, index: int, scene=None, params=None, worker=None)
                 paths[kind] = rel
         except (OSError, IsaacError) as exc:
             error = error or " ".join(f"could not finish the log: {exc}".split())
+        clock.lap("record")
     row = {"index": index, **(sweep.params(index) if params is None else params)}
     if measure is not None:
         row.update(measure.values())
+    clock.lap("metrics")
     row["status"] = "ok" if error is None else "failed"
     row["error"] = error
     if task["record"] != "none":
@@ -252,6 +302,7 @@ def run_one(task: dict, sweep, index: int, scene=None, params=None, worker=None)
         row["rrd_sha256"] = (
             sha256_of(os.path.join(out_dir, paths["rrd"])) if "rrd" in paths else None
         )
+    clock.lap("record")
     row["wall_time_s"] = time.perf_counter() - started
     row["worker"] = worker or _worker_name()
     return row
