@@ -5,7 +5,9 @@ and a replay loads it back with `load_scene_text`. So a box, a regular polygon o
 generator makes must pass exactly what a `polygon:` body given by hand passes, or the log of a
 scene that ran could not be replayed. The loader runs `first_problem` on every expanded scene,
 and the log's line reader (isaac.scene.fast_reader) runs it on every body it reads: one
-function, so `load_scene_text(scene_to_yaml(scene))` accepts every scene that loads.
+function, so `load_scene_text(scene_to_yaml(scene))` accepts every scene that loads. Joints
+likewise: `first_joint_problem` holds the rules of the `joints:` section for JointSpecs however
+they were made (the loader's, a scene built in Python, a log's text read back).
 
 Besides the ranges of docs/scene-format.md, a body's mass (area x density) and moment of
 inertia (second moment of area x density), as the engine computes them, and their inverses
@@ -15,6 +17,7 @@ must be finite normal floats: a subnormal or zero mass makes the impulses infini
 from __future__ import annotations
 
 import itertools
+import math
 import operator
 import sys
 from typing import NamedTuple
@@ -23,26 +26,36 @@ import numpy as np
 
 from isaac.scene import circle, polygon
 from isaac.scene.limits import (
+    AXIS_TOLERANCE,
     FILTER_BITS,
+    MAX_ANCHOR,
     MAX_COORDINATE,
+    MAX_DAMPING_RATIO,
     MAX_DENSITY,
     MAX_FRICTION,
     MAX_GROUP,
+    MAX_JOINT_LENGTH,
+    MAX_JOINTS,
+    MAX_MOTOR_FORCE,
+    MAX_MOTOR_TORQUE,
     MAX_NAME_LENGTH,
+    MAX_REFERENCE_ANGLE,
     MAX_SIZE,
     MAX_SPEED,
+    MAX_STIFFNESS,
     MAX_TIME,
     MIN_SIZE,
 )
 from isaac.scene.reader import shown, valid_name
-from isaac.scene.spec import BodySpec
+from isaac.scene.spec import JOINT_KINDS, BodySpec, JointSpec
 
 MIN_NORMAL = sys.float_info.min  # 2.2250738585072014e-308, the smallest normal float64
 
 
 class Problem(NamedTuple):
     """What is wrong with body `index`: `field` is the BodySpec field at fault ("vertices",
-    "position", ...) or "mass" (mass or inertia from vertices and density); `what` one line."""
+    "position", ...) or "mass" (mass or inertia from vertices and density); `what` one line.
+    From `first_joint_problem`: joint `index` and a JointSpec field."""
 
     index: int
     field: str
@@ -228,3 +241,189 @@ def _why(body: BodySpec, facts: polygon.PolygonFacts, i: int, props: MassPropert
         f"inertia {inertia!r} kg m^2 (second moment {second!r} m^4 x density) and their "
         "inverses must be finite normal numbers; change the density or the size"
     )
+
+
+# --- joints ---------------------------------------------------------------------------------
+
+SEED_JOINTS = (
+    "joints need the sequential solver (world.solver: sequential, or fidelity fast, balanced "
+    "or accurate): the seed's single pass has no joint rows"
+)
+
+# the JointSpec fields each kind uses; every other one keeps its default
+_KIND_FIELDS = {
+    "revolute": ("lower", "upper", "motor_speed", "max_motor"),
+    "distance": ("length", "min_length", "max_length", "stiffness", "damping_ratio"),
+    "weld": ("stiffness", "damping_ratio"),
+    "prismatic": ("axis", "lower", "upper", "motor_speed", "max_motor"),
+}
+_JOINT_DEFAULTS = {
+    "axis": (1.0, 0.0),
+    "length": 0.0,
+    "min_length": None,
+    "max_length": None,
+    "stiffness": None,
+    "damping_ratio": 0.0,
+    "lower": None,
+    "upper": None,
+    "motor_speed": None,
+    "max_motor": 0.0,
+}
+
+
+def unit_axis(axis: tuple[float, float]) -> tuple[float, float]:
+    """`axis` as a unit vector: itself when its length is already within AXIS_TOLERANCE of 1
+    (so a stored axis read back is the same bits), else divided by its length (IEEE sqrt, the
+    same bits everywhere)."""
+    x, y = float(axis[0]), float(axis[1])
+    n = math.sqrt(x * x + y * y)
+    if abs(n - 1.0) <= AXIS_TOLERANCE:
+        return (x, y)
+    return (x / n, y / n)
+
+
+def joint_solver_problem(solver: str, joints) -> str | None:
+    """Why a world with solver `solver` cannot hold `joints`, or None."""
+    return SEED_JOINTS if len(joints) and solver == "seed" else None
+
+
+def _real(x, lo: float, hi: float, lo_open: bool = False) -> bool:
+    if isinstance(x, bool) or not isinstance(x, (int, float)):
+        return False
+    return (x > lo if lo_open else x >= lo) and x <= hi  # NaN fails both
+
+
+def _point(p, bound: float) -> bool:
+    return isinstance(p, tuple) and len(p) == 2 and all(_real(v, -bound, bound) for v in p)
+
+
+def joint_problem(bodies, joint: JointSpec) -> tuple[str, str] | None:
+    """(JointSpec field, one line) of what is wrong with `joint` among `bodies`, or None.
+
+    The rules of docs/scene-format.md, `joints:`: a valid name and kind; two different bodies
+    (indices into `bodies`), not both concrete; anchors (body frames) within MAX_ANCHOR; the
+    fields its kind does not use at their defaults; reference angle, lengths (min <= length <=
+    max), stiffness, damping (only with stiffness), limits (both or neither, lower <= upper,
+    revolute within [-pi, pi]), motor (speed and a max >= 0, both or neither) in range; a
+    prismatic axis of unit length (within AXIS_TOLERANCE); collide_connected a bool.
+    """
+    j = joint
+    if not isinstance(j.name, str) or not valid_name(j.name):
+        return "name", f"a joint name must be 1 to {MAX_NAME_LENGTH} printable characters"
+    if j.kind not in JOINT_KINDS:
+        return "kind", f"{j.kind!r} is not one of {', '.join(JOINT_KINDS)}"
+    n = len(bodies)
+    for field in ("a", "b"):
+        i = getattr(j, field)
+        if isinstance(i, bool) or not isinstance(i, int) or not 0 <= i < n:
+            return field, f"body index {i!r} is not one of the scene's {n} bodies (0..{n - 1})"
+    if j.a == j.b:
+        return "b", (
+            f"the joint's two bodies are the same body {shown(bodies[j.a].name)}: a joint joins "
+            "two different bodies"
+        )
+    if bodies[j.a].concrete and bodies[j.b].concrete:
+        return "a", (
+            f"both bodies ({shown(bodies[j.a].name)} and {shown(bodies[j.b].name)}) are "
+            "concrete: a joint needs a movable body (one concrete body pins the other to the "
+            "world)"
+        )
+    for field in ("local_a", "local_b"):
+        if not _point(getattr(j, field), MAX_ANCHOR):
+            return field, (
+                f"the anchor {getattr(j, field)!r} must be two numbers (m, the body's frame), "
+                f"each in [{-MAX_ANCHOR!r}, {MAX_ANCHOR!r}]"
+            )
+    if not _real(j.reference_angle, -MAX_REFERENCE_ANGLE, MAX_REFERENCE_ANGLE):
+        return "reference_angle", (
+            f"reference_angle {j.reference_angle!r} rad must be in "
+            f"[{-MAX_REFERENCE_ANGLE!r}, {MAX_REFERENCE_ANGLE!r}]"
+        )
+    if not isinstance(j.collide_connected, bool):
+        return "collide_connected", f"expected true or false, got {j.collide_connected!r}"
+    used = _KIND_FIELDS[j.kind]
+    for field, default in _JOINT_DEFAULTS.items():
+        value = getattr(j, field)
+        if field not in used and value != default:
+            return field, f"a {j.kind} joint has no {field} (it must stay {default!r})"
+    return _kind_problem(j)
+
+
+def _kind_problem(j: JointSpec) -> tuple[str, str] | None:
+    if j.kind == "prismatic":
+        ok = _point(j.axis, 2.0)
+        if ok:
+            x, y = j.axis
+            ok = abs(math.sqrt(x * x + y * y) - 1.0) <= AXIS_TOLERANCE
+        if not ok:
+            return "axis", f"the axis {j.axis!r} must be a unit vector (a's frame)"
+    if j.kind == "distance":
+        if not _real(j.length, 0.0, MAX_JOINT_LENGTH, lo_open=True):
+            return "length", f"length {j.length!r} m must be > 0 and <= {MAX_JOINT_LENGTH!r}"
+        lo, hi = j.min_length, j.max_length
+        if lo is not None and not _real(lo, 0.0, MAX_JOINT_LENGTH):
+            return "min_length", f"min_length {lo!r} m must be in [0, {MAX_JOINT_LENGTH!r}]"
+        if hi is not None and not _real(hi, 0.0, MAX_JOINT_LENGTH, lo_open=True):
+            return "max_length", (f"max_length {hi!r} m must be > 0 and <= {MAX_JOINT_LENGTH!r}")
+        if lo is not None and hi is not None and lo > hi:
+            return "min_length", f"min_length {lo!r} m is greater than max_length {hi!r} m"
+        if lo is not None and lo > j.length:
+            return "min_length", f"min_length {lo!r} m is greater than the length {j.length!r} m"
+        if hi is not None and hi < j.length:
+            return "max_length", f"max_length {hi!r} m is less than the length {j.length!r} m"
+    if j.kind in ("distance", "weld"):
+        if j.stiffness is not None and not _real(j.stiffness, 0.0, MAX_STIFFNESS, lo_open=True):
+            return "stiffness", f"stiffness {j.stiffness!r} Hz must be > 0 and <= {MAX_STIFFNESS!r}"
+        if not _real(j.damping_ratio, 0.0, MAX_DAMPING_RATIO):
+            return "damping_ratio", (
+                f"damping_ratio {j.damping_ratio!r} must be in [0, {MAX_DAMPING_RATIO!r}]"
+            )
+        if j.stiffness is None and j.damping_ratio != 0.0:
+            return "damping_ratio", "damping_ratio needs stiffness (a rigid joint has no spring)"
+    if j.kind in ("revolute", "prismatic"):
+        bound = math.pi if j.kind == "revolute" else MAX_JOINT_LENGTH
+        unit = "rad" if j.kind == "revolute" else "m"
+        if (j.lower is None) != (j.upper is None):
+            return "lower", "give both limits (lower and upper) or neither"
+        if j.lower is not None:
+            for field in ("lower", "upper"):
+                if not _real(getattr(j, field), -bound, bound):
+                    return field, (
+                        f"the {field} limit {getattr(j, field)!r} {unit} must be in "
+                        f"[{-bound!r}, {bound!r}]"
+                    )
+            if j.lower > j.upper:
+                return "lower", (
+                    f"the lower limit {j.lower!r} {unit} is greater than the upper limit "
+                    f"{j.upper!r} {unit}"
+                )
+        top = MAX_MOTOR_TORQUE if j.kind == "revolute" else MAX_MOTOR_FORCE
+        if j.motor_speed is not None and not _real(j.motor_speed, -MAX_SPEED, MAX_SPEED):
+            return "motor_speed", (
+                f"the motor speed {j.motor_speed!r} must be in [{-MAX_SPEED!r}, {MAX_SPEED!r}]"
+            )
+        if not _real(j.max_motor, 0.0, top):
+            return "max_motor", f"the motor's maximum {j.max_motor!r} must be in [0, {top!r}]"
+        if j.motor_speed is None and j.max_motor != 0.0:
+            return "max_motor", "max_motor is given without a motor speed"
+    return None
+
+
+def first_joint_problem(bodies, joints) -> Problem | None:
+    """The first joint of `joints` (JointSpecs over `bodies`) a scene may not hold, and why
+    (`joint_problem`, then names unique among the joints, at most MAX_JOINTS); None if none."""
+    if len(joints) > MAX_JOINTS:
+        return Problem(MAX_JOINTS, "name", f"a scene has at most {MAX_JOINTS} joints")
+    seen: dict[str, int] = {}
+    for i, joint in enumerate(joints):
+        why = joint_problem(bodies, joint)
+        if why is not None:
+            return Problem(i, *why)
+        first = seen.setdefault(joint.name, i)
+        if first != i:
+            return Problem(
+                i,
+                "name",
+                f"duplicate joint name {shown(joint.name)} (already used by joints[{first}])",
+            )
+    return None

@@ -30,6 +30,20 @@ MAX_PYRAMID_ROWS = 446  # 446 * 447 / 2 = 99,681 boxes: the largest pyramid unde
 PILE_CONTAINER_BODIES = 3  # floor, left and right wall
 MAX_PILE_COUNT = MAX_BODIES - PILE_CONTAINER_BODIES
 
+# Joints (the `joints:` section, isaac.scene.checks.joint_problem)
+MAX_JOINTS = 100_000
+# m: each coordinate of an anchor in its body's frame: a world point within MAX_COORDINATE of
+# the origin seen from a body centre also within it is at most 2 * sqrt(2) * 1e9 m away
+MAX_ANCHOR = 3e9
+MAX_JOINT_LENGTH = 1e10  # m: distance joints' lengths, prismatic limits along the axis
+MAX_REFERENCE_ANGLE = 2 * MAX_SPEED  # rad: the difference of two body angles
+MIN_AXIS = 1e-9  # a prismatic axis shorter than this gives no direction
+AXIS_TOLERANCE = 1e-12  # a stored axis is unit: | |axis| - 1 | <= this
+MAX_STIFFNESS = 1e6  # Hz
+MAX_DAMPING_RATIO = 1e3
+MAX_MOTOR_TORQUE = 1e15  # N m
+MAX_MOTOR_FORCE = 1e15  # N
+
 # Input size. A scene text in the exact form `scene_to_yaml` writes (what a log stores) is read
 # by a line reader that builds no YAML node tree (isaac.scene.fast_reader), in time and memory
 # linear in its size: up to MAX_SCENE_BYTES, the text of 100,000 bodies of 50 vertices (about
@@ -41,7 +55,7 @@ MAX_SCENE_BYTES = 256 * 1024 * 1024
 MAX_YAML_BYTES = 64 * 1024 * 1024
 MAX_YAML_NODES = 30 * MAX_BODIES
 MAX_BODY_NODES = 200  # a body of MAX_VERTICES vertices with every key given has 181
-MAX_SECTION_NODES = 100_000  # under `world:`, `generators:` or `analytic:` (not `bodies:`)
+MAX_SECTION_NODES = 100_000  # under `world:`, `generators:`, `joints:`, `analytic:` (not `bodies:`)
 MAX_LIST_ITEMS = MAX_BODIES  # the longest list a scene has is `bodies:`
 MAX_NESTING = 32  # a scene nests 7 deep, `analytic:` at most 17
 MAX_QUOTED = 60  # characters of a value or key quoted in an error message

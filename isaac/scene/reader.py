@@ -292,6 +292,11 @@ def _suggestion(text: str, options) -> str | None:
     return close[0] if close else None
 
 
+def suggestion(text: str, options) -> str | None:
+    """The option of `options` closest to the misspelt `text` (difflib, cutoff 0.6), or None."""
+    return _suggestion(text, options)
+
+
 def fraction(text: str) -> float:
     """The float nearest the fraction `text` ("1/120", whole numbers either side), correctly
     rounded (`fractions.Fraction`), so `1/120` is the float Python's 1 / 120 gives. ValueError

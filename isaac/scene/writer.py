@@ -10,7 +10,7 @@ import re
 
 from isaac.scene.reader import fraction
 from isaac.scene.settings import WorldSettings
-from isaac.scene.spec import BodySpec, Scene
+from isaac.scene.spec import BodySpec, JointSpec, Scene
 
 _WORLD_FIELDS = tuple(f.name for f in dataclasses.fields(WorldSettings))
 
@@ -82,7 +82,8 @@ def _shape(body: BodySpec) -> str:
 def scene_to_yaml(scene: Scene) -> str:
     """The expanded scene as YAML text: every world setting and every body explicit (generators
     already expanded, shapes as `polygon:` of the stored vertices or `circle:`), floats written
-    with `repr`; a body's collision filter only when it is not the default.
+    with `repr`; a body's collision filter only when it is not the default; the joints (none:
+    no `joints:` line) each in its bodies' frames with every value it uses.
 
     ``load_scene_text(scene_to_yaml(s), source=s.source)`` equals `s` field by field, bit for
     bit (`source` is not part of the text: it says where a text came from), and writes the same
@@ -110,6 +111,51 @@ def scene_to_yaml(scene: Scene) -> str:
         if body.filtered:
             for name in _FILTER_FIELDS:
                 add(f"    {name}: {getattr(body, name)}")
+    if scene.joints:
+        lines.append("joints:")
+        names = [body.name for body in scene.bodies]
+        for joint in scene.joints:
+            lines.extend(_joint_lines(joint, names))
     if scene.analytic is not None:
         lines.append(f"analytic: {_yaml_value(scene.analytic)}")
     return "\n".join(lines) + "\n"
+
+
+def _number(value) -> str:
+    return _yaml_value(float(value))
+
+
+def _joint_lines(joint: JointSpec, names) -> list[str]:
+    """One joint, fully explicit in its bodies' frames (`frame: body`), every key in the order
+    the fast reader expects; a key the joint does not use, or an option it leaves out, is not
+    written."""
+    j = joint
+    lines = [
+        f"  - name: {_yaml_value(j.name)}",
+        f"    type: {j.kind}",
+        f"    bodies: [{_yaml_value(names[j.a])}, {_yaml_value(names[j.b])}]",
+        "    frame: body",
+        f"    anchor_a: [{_number(j.local_a[0])}, {_number(j.local_a[1])}]",
+        f"    anchor_b: [{_number(j.local_b[0])}, {_number(j.local_b[1])}]",
+    ]
+    if j.kind == "prismatic":
+        lines.append(f"    axis: [{_number(j.axis[0])}, {_number(j.axis[1])}]")
+    lines.append(f"    reference_angle: {_number(j.reference_angle)}")
+    if j.kind == "distance":
+        lines.append(f"    length: {_number(j.length)}")
+        for key in ("min_length", "max_length"):
+            if getattr(j, key) is not None:
+                lines.append(f"    {key}: {_number(getattr(j, key))}")
+    if j.kind in ("distance", "weld") and j.stiffness is not None:
+        lines.append(f"    stiffness: {_number(j.stiffness)}")
+        lines.append(f"    damping_ratio: {_number(j.damping_ratio)}")
+    if j.kind in ("revolute", "prismatic"):
+        if j.lower is not None:
+            lines.append(f"    limits: [{_number(j.lower)}, {_number(j.upper)}]")
+        if j.motor_speed is not None:
+            most = "max_torque" if j.kind == "revolute" else "max_force"
+            lines.append(
+                f"    motor: {{speed: {_number(j.motor_speed)}, {most}: {_number(j.max_motor)}}}"
+            )
+    lines.append(f"    collide_connected: {_yaml_value(j.collide_connected)}")
+    return lines
