@@ -846,7 +846,9 @@ def load_scene_text(text: str, source: str = "<text>", *, default_name: str | No
     collecting = gc.isenabled()
     gc.disable()
     try:
-        scene = fast_reader.read(text, source, default_name or "scene", _read_head, _body_alone)
+        scene = fast_reader.read(
+            text, source, default_name or "scene", _read_head, _body_alone, _joint_alone
+        )
         if scene is not None:
             return scene
         if len(text) > MAX_YAML_BYTES:
