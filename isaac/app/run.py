@@ -69,9 +69,10 @@ def cmd_check(args: argparse.Namespace) -> int:
     w = scene.world
     written = dict(scene.as_written).get("world.dt")  # `dt: 1/120`, as the scene says it
     dt = f"{written} s ({w.dt!r})" if written else f"{w.dt} s"
+    joints = f", {len(scene.joints)} joints" if scene.joints else ""
     print(
         f"{args.scene}: ok: scene {scene.name!r}, {len(scene.bodies)} bodies "
-        f"({concrete} concrete), dt {dt}, {w.steps} steps, fidelity {w.fidelity}"
+        f"({concrete} concrete){joints}, dt {dt}, {w.steps} steps, fidelity {w.fidelity}"
     )
     return 0
 
