@@ -517,10 +517,11 @@ def _read_joint(r: Reader, node, path: str, index: int, bodies, index_of: dict) 
     """The JointSpec of joint item `node` (joints[index]) over the scene's `bodies`;
     `index_of` maps body names to their indices."""
     m = r.mapping(node, path, _JOINT_KEYS)
-    for key in ("type", "bodies"):
-        if key not in m:
-            raise r.fail(f"missing key {key!r}", node, path)
+    if "type" not in m:
+        raise r.fail(f"missing key 'type' (one of {', '.join(JOINT_KINDS)})", node, path)
     kind = r.choice(m["type"][1], join_path(path, "type"), JOINT_KINDS)
+    if "bodies" not in m:
+        raise r.fail("missing key 'bodies' ([NAME_A, NAME_B])", node, path)
     own = _KIND_KEYS[kind]
     for key, (key_node, _) in m.items():
         if key not in _COMMON_JOINT_KEYS and key not in own:
