@@ -515,3 +515,19 @@ def test_load_scene_file_errors_carry_the_path(tmp_path):
     with pytest.raises(SceneError) as caught:
         load_scene(path)
     assert str(caught.value).startswith(f"{path}:{J + 1}: joints[0].bodies[1]: no body named")
+
+
+def test_the_docs_example_loads():
+    import re
+    from pathlib import Path
+
+    doc = (Path(__file__).resolve().parent.parent / "docs" / "scene-format.md").read_text()
+    example = re.search(r"A pendulum, and a car's wheel:\n\n```yaml\n(.*?)```", doc, re.S)
+    string, axle = load_scene_text(example.group(1)).joints
+    assert (string.kind, string.length, string.local_b) == ("distance", 1.0, (0.0, 0.0))
+    assert (axle.kind, axle.motor_speed, axle.max_motor, axle.local_b) == (
+        "revolute",
+        -10.0,
+        50.0,
+        (0.0, 0.0),
+    )
