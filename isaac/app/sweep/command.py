@@ -2,9 +2,9 @@
 
 Outline of `execute`:
 
-1. read     the sweep file and its scene (its warnings said once); the first PRE_CHECK runs'
-            scenes checked by the scene loader here, so that most bad input is refused (one
-            line, exit 2) before a cluster is asked for.
+1. read     the sweep file and its scene (its warnings said once); when a local cluster is to
+            be started, the first PRE_CHECK runs' scenes checked by the scene loader here, so
+            that most bad input is refused (one line, exit 2) before a cluster is started.
 2. folder   OUT/ found holding this same sweep (resume: the rows of finished runs whose logs
             are complete are kept, the other runs are to do), or new.
 3. check    on the cluster: every other run's scene loaded by the scene loader, in chunks
@@ -12,8 +12,7 @@ Outline of `execute`:
             or is written, with the message the loader gives here. The loaded scenes stay on
             the workers for step 5: each run's scene is read once.
 4. warm up  the kernels of each distinct world setting compiled into numba's on-disk cache once
-            (here for a local cluster, on one worker for a remote one), then loaded by every
-            worker at once, before the fan-out.
+            by one worker, then loaded by every worker at once, before the fan-out.
 5. fan out  OUT/ written; the same chunks as Dask tasks (`worker.run_chunk`), each next to its
             loaded scenes; rows come back as chunks finish, with a progress bar over runs.
 6. gather   runs.parquet (every row, by index), the PNG plots, and the summary.
@@ -44,7 +43,11 @@ from isaac.errors import IsaacError
 MAX_CHUNK = 100
 TASKS_PER_WORKER = 4  # at least this many tasks per worker while runs last (load balance)
 MAX_WARM_UP = 8  # distinct world settings compiled before the fan-out (others as they come)
-PRE_CHECK = 32  # runs whose scenes are checked in this process, before any cluster is asked
+# runs whose scenes are checked here before a local cluster is started, for at most this long:
+# where the line falls changes which process finds a refusal, never which run it names (the
+# cluster checks all the runs past it, and the first refused is said)
+PRE_CHECK = 32
+PRE_CHECK_SECONDS = 0.1
 # the loaded scenes stay on the workers until their runs are done while the sweep's runs x the
 # base scene's bodies are at most this (about 1 kB a body), else each run loads its own again
 KEEP_SCENES_BODIES = 2_000_000
@@ -230,7 +233,13 @@ def execute(
         raise IsaacError(f"--workers must be >= 1, got {workers}")
     if chunk is not None and chunk < 1:
         raise IsaacError(f"--chunk must be >= 1, got {chunk}")
-    pre = load_runs(sweep, range(min(sweep.n_runs, PRE_CHECK)), keep=False)
+    # a cluster that runs already costs nothing to ask: every run is checked there
+    pre = load_runs(
+        sweep,
+        range(0 if remote else min(sweep.n_runs, PRE_CHECK)),
+        keep=False,
+        budget=PRE_CHECK_SECONDS,
+    )
     if pre["refused"] is not None:
         raise refusal(sweep, pre["refused"])
     phases["read"] = time.perf_counter() - started
@@ -250,7 +259,7 @@ def execute(
             todo,
             out,
             done,
-            pre["worlds"],
+            pre,
             client,
             scheduler,
             workers,
@@ -309,12 +318,13 @@ def execute(
     )
 
 
-def _check_on_cluster(client, sweep_f, sweep, todo_chunks, kept) -> tuple[list, dict]:
+def _check_on_cluster(client, sweep_f, sweep, todo_chunks, kept, checked) -> tuple[list, dict]:
     """Step 3: (futures of the todo chunks' `load_chunk` results, kept on the workers; world
-    settings {repr: first run}). SweepError for the first run refused."""
+    settings {repr: first run}). `checked`: runs 0 .. checked - 1 were checked already. SweepError
+    for the first run refused."""
     keep = sweep.n_runs * len(sweep.scene.bodies) <= KEEP_SCENES_BODIES
     # the kept runs (a resume) are checked as well, past the ones checked here already
-    others = [i for i in sorted(kept) if i >= PRE_CHECK]
+    others = [i for i in sorted(kept) if i >= checked]
     other_chunks = _chunks(others, max(len(c) for c in todo_chunks))
     n, m = len(todo_chunks), len(other_chunks)
     loads = client.map(
@@ -335,7 +345,7 @@ def _check_on_cluster(client, sweep_f, sweep, todo_chunks, kept) -> tuple[list, 
     return loads, worlds
 
 
-def _fan_out(sweep, todo, out, done, worlds, client, scheduler, workers, chunk, progress, phases):
+def _fan_out(sweep, todo, out, done, pre, client, scheduler, workers, chunk, progress, phases):
     """Steps 3 to 5; fills `done` {index: row} and `phases` (seconds). Returns (interrupted,
     workers used)."""
     from dask.distributed import as_completed
@@ -347,7 +357,6 @@ def _fan_out(sweep, todo, out, done, worlds, client, scheduler, workers, chunk, 
     interrupted = False
     n_workers = 0
     try:
-        local = own and not (scheduler or os.environ.get("DASK_SCHEDULER_ADDRESS"))
         t0 = time.perf_counter()
         if own:
             client, cluster = start_cluster(scheduler, workers)
@@ -358,19 +367,18 @@ def _fan_out(sweep, todo, out, done, worlds, client, scheduler, workers, chunk, 
         chunks = _chunks(todo, size)
         sweep_f = client.scatter(sweep, broadcast=True, hash=False)
         phases["cluster"] = (t1 := time.perf_counter()) - t0
-        loads, seen = _check_on_cluster(client, sweep_f, sweep, chunks, set(done))
+        checked = len(pre["indices"])
+        loads, seen = _check_on_cluster(client, sweep_f, sweep, chunks, set(done), checked)
+        worlds = dict(pre["worlds"])
         for w, i in seen.items():
             worlds[w] = min(i, worlds.get(w, i))
         phases["check"] = (t0 := time.perf_counter()) - t1
         warm = [sweep.run_scene_text(i) for i in sorted(worlds.values())[:MAX_WARM_UP]]
         warm_args = (warm, sweep.scene_path, sweep.scene_name, sweep.record)
-        if local:
-            # the workers share this machine's numba cache: fill it once, here
-            work.warm_up(*warm_args)
-        else:
-            client.submit(work.warm_up, *warm_args, pure=False).result()
-        # each worker process loads them from the cache now, all at once, rather than inside
-        # its first run
+        # one worker fills numba's on-disk cache (which the workers of one machine share; this
+        # process need not load the engine at all), then each worker process loads the kernels
+        # from it, all at once, rather than each compiling them inside its first run
+        client.submit(work.warm_up, *warm_args, pure=False).result()
         client.run(work.warm_up, *warm_args)
         _prepare_out(sweep, out)
         phases["warm_up"] = (t1 := time.perf_counter()) - t0

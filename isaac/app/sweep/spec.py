@@ -9,6 +9,7 @@ from __future__ import annotations
 import hashlib
 import math
 import os
+import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -373,16 +374,20 @@ def _read_dist(r: Reader, node, path: str) -> tuple:
 # --- every run's scene, checked -------------------------------------------------------------
 
 
-def load_runs(sweep: Sweep, indices, keep: bool = True) -> dict:
+def load_runs(sweep: Sweep, indices, keep: bool = True, budget: float | None = None) -> dict:
     """Load the scenes of runs `indices` (in order) with the scene loader, up to the first one it
-    refuses. {"indices": the runs loaded, "scenes": their Scenes (None unless `keep`),
-    "params": their table values, "refused": the index of the first run refused (else None),
-    "worlds": {world settings repr: first run index with them}}. Plain data: a Dask worker
-    returns it, and `refusal` names the refused run's key from it."""
+    refuses (or, with `budget`, until that many seconds have passed: the runs loaded are then a
+    first part of `indices`). {"indices": the runs loaded, "scenes": their Scenes (None unless
+    `keep`), "params": their table values, "refused": the index of the first run refused (else
+    None), "worlds": {world settings repr: first run index with them}}. Plain data: a Dask
+    worker returns it, and `refusal` names the refused run's key from it."""
     scenes: list | None = [] if keep else None
     done, params, worlds = [], [], {}
     refused = None
+    until = None if budget is None else time.perf_counter() + budget
     for index in indices:
+        if until is not None and time.perf_counter() > until:
+            break
         draws = sweep.draws(index)
         values = {(id(a.slot.container), a.slot.key): node for a, node, _ in draws}
         text = keys.emit(sweep.root, values)
