@@ -531,3 +531,20 @@ def test_the_docs_example_loads():
         50.0,
         (0.0, 0.0),
     )
+
+
+def test_no_overlap_warning_for_bodies_a_joint_keeps_apart():
+    from isaac.scene.warnings import scene_warnings
+
+    text = """\
+world: {gravity: [0, 0]}
+bodies:
+  - {name: chassis, shape: {box: [2.0, 0.5]}, position: [0.0, 0.0]}
+  - {name: wheel, shape: {circle: {radius: 0.4}}, position: [0.8, -0.2]}
+joints:
+  - {type: revolute, bodies: [chassis, wheel], anchor: [0.8, -0.2]COLLIDE}
+"""
+    quiet = scene_warnings(load_scene_text(text.replace("COLLIDE", "")))
+    loud = scene_warnings(load_scene_text(text.replace("COLLIDE", ", collide_connected: true")))
+    assert not any("overlaps" in line for line in quiet), quiet
+    assert any("'chassis' and 'wheel'" in line for line in loud), loud

@@ -206,6 +206,11 @@ def _placement(scene: Scene, first: np.ndarray, last: np.ndarray) -> list[str]:
         f = {k: np.array([getattr(x, k) for x in bodies], dtype=np.int64) for k in _FILTER}
         cat, mask, group = f["category"], f["mask"], f["group"]
         keep &= collides(cat[a], mask[a], group[a], cat[b], mask[b], group[b])
+    apart = [(min(j.a, j.b), max(j.a, j.b)) for j in scene.joints if not j.collide_connected]
+    if apart:  # nor two bodies a joint connects (a wheel inside its chassis), unless it says so
+        keys = np.unique(np.array([lo * n + hi for lo, hi in apart], dtype=np.int64))
+        pair = np.minimum(a, b).astype(np.int64) * n + np.maximum(a, b)
+        keep &= ~np.isin(pair, keys)
     a, b = a[keep], b[keep]
     lines = []
     # a movable body beside a concrete one that exists at the movable body's first step
