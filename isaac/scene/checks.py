@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import itertools
 import math
+import numbers
 import operator
 import sys
 from typing import NamedTuple
@@ -315,7 +316,7 @@ def joint_problem(bodies, joint: JointSpec) -> tuple[str, str] | None:
     n = len(bodies)
     for field in ("a", "b"):
         i = getattr(j, field)
-        if isinstance(i, bool) or not isinstance(i, int) or not 0 <= i < n:
+        if isinstance(i, bool) or not isinstance(i, numbers.Integral) or not 0 <= i < n:
             return field, f"body index {i!r} is not one of the scene's {n} bodies (0..{n - 1})"
     if j.a == j.b:
         return "b", (

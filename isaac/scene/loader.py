@@ -622,13 +622,13 @@ def _read_limits(r: Reader, m: dict, path: str, kind: str) -> dict:
         return {}
     limits_path = join_path(path, "limits")
     items = r.sequence(m["limits"][1], limits_path, min_len=2, max_len=2, what="numbers")
-    bound = math.pi if kind == "revolute" else MAX_JOINT_LENGTH
+    # a revolute's limits: any finite number read, then [-pi, pi] said with its reason
+    bound = math.inf if kind == "revolute" else MAX_JOINT_LENGTH
     lower, upper = (
-        r.number(item, f"{limits_path}[{k}]", -MAX_JOINT_LENGTH, MAX_JOINT_LENGTH)
-        for k, item in enumerate(items)
+        r.number(item, f"{limits_path}[{k}]", -bound, bound) for k, item in enumerate(items)
     )
     for k, value in enumerate((lower, upper)):
-        if not -bound <= value <= bound:
+        if kind == "revolute" and not -math.pi <= value <= math.pi:
             raise r.fail(
                 f"the limit {value!r} rad is outside [-pi, pi]: the joint angle (angle_b - "
                 "angle_a - reference_angle) is wrapped to [-pi, pi]",
