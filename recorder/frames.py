@@ -15,7 +15,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from isaac.engine.records import Contacts, StepRecord
+from isaac.engine.records import CONTACT_FIELDS, StepRecord
 
 STAT_KEYS = (
     "kinetic_energy",
@@ -43,28 +43,35 @@ def _pad8(n: int) -> int:
 
 def frame_sizes(record: StepRecord) -> tuple[int, int, int]:
     """Bytes of `record`'s Bodies and Contacts messages, and of its frame (a multiple of 8)."""
-    from recorder.pack import message_sizes
+    from recorder.pack import manifold_count, message_sizes
 
+    c = record.contacts
     bodies, contacts = message_sizes(
-        int(record.step), int(record.angle.shape[0]), len(record.contacts)
+        int(record.step),
+        int(record.angle.shape[0]),
+        len(c),
+        manifold_count(np.asarray(c.slot, dtype=np.int32)) if len(c) else 0,
     )
     return bodies, contacts, FRAME_HEAD.size + _pad8(bodies) + _pad8(contacts)
 
 
-# contact rows a moving body keeps a step, for `expected_log_bytes` (measured: 1.6 on the default
-# scene, 2.3 on the 503-body pile)
+# contact rows a moving body keeps a step, and points per manifold, for `expected_log_bytes`
+# (measured: 1.6 points and 1.25 points a manifold on the default scene, 2.1 and 1.36 in the
+# first 400 steps of the 503-body pile)
 ROWS_PER_MOVING_BODY = 2.0
+POINTS_PER_MANIFOLD = 1.3
 STEP_OVERHEAD_BYTES = 400  # /stats message, the MCAP message records and the chunk index share
 
 
 def expected_log_bytes(n_bodies: int, n_moving: int, steps: int) -> tuple[int, int]:
     """(bytes a step, bytes) an MCAP log of `steps` steps (after step 0) is expected to take,
-    uncompressed: the exact /bodies size and /contacts at ROWS_PER_MOVING_BODY rows per moving
-    body (within 15 % of the default scene's and the pile's logs)."""
+    uncompressed: the exact /bodies size and /contacts at ROWS_PER_MOVING_BODY points per
+    moving body, POINTS_PER_MANIFOLD to a manifold (within 15 % of the default scene's and
+    the pile's logs)."""
     from recorder.pack import message_sizes
 
     rows = int(round(ROWS_PER_MOVING_BODY * n_moving))
-    bodies, contacts = message_sizes(steps, n_bodies, rows)
+    bodies, contacts = message_sizes(steps, n_bodies, rows, int(round(rows / POINTS_PER_MANIFOLD)))
     per_step = bodies + contacts + STEP_OVERHEAD_BYTES
     return per_step, per_step * (steps + 1)
 
@@ -185,6 +192,7 @@ def pack_into(
         c.point,
         c.normal,
         c.depth,
+        c.pair_depth,
         c.push_a,
         c.push_b,
         c.impulse,
@@ -246,40 +254,14 @@ class Frame:
         return np.frombuffer(flags, dtype=np.bool_) if len(flags) else np.ones(self.n, dtype=bool)
 
     def record(self) -> StepRecord:
-        """The step as a StepRecord: read-only views of one copy of the frame's values."""
-        from recorder.pack import CONTACT_FIELDS
+        """The step as a StepRecord: read-only views of one copy of the frame's messages
+        (`recorder.reader.record_from_messages`)."""
+        from recorder import schema as S
+        from recorder.reader import record_from_messages
 
-        n, m = self.n, self.m
-        data = bytes(self.bodies) + bytes(self.contacts)  # one copy: the ring slot is reused
-        base = len(self.bodies)
-        spans = _field_spans(self.bodies, 5) + [
-            (start + base, size) for start, size in _field_spans(self.contacts, 13)
-        ]
-
-        def values(k, dtype, shape):
-            start, size = spans[k]
-            if not size:
-                return np.zeros(shape, dtype=dtype)
-            return np.frombuffer(
-                data, dtype=dtype, count=size // np.dtype(dtype).itemsize, offset=start
-            ).reshape(shape)
-
-        exists = values(4, np.bool_, (n,)) if spans[4][1] else np.ones(n, dtype=bool)
-        c = {}
-        for j, name in enumerate(CONTACT_FIELDS):
-            pair = name in ("point", "normal", "push_a", "push_b")
-            c[name] = values(5 + j, "<i4" if j < 5 else "<f8", (m, 2) if pair else (m,))
-        return StepRecord(
-            step=self.step,
-            time=self.time,
-            position=values(0, "<f8", (n, 2)),
-            angle=values(1, "<f8", (n,)),
-            velocity=values(2, "<f8", (n, 2)),
-            angular_velocity=values(3, "<f8", (n,)),
-            exists=exists,
-            # the frame carries no pair depth (the /contacts message of format 1 has none)
-            contacts=Contacts(**c, pair_depth=np.full(m, np.nan)),
-        )
+        # one copy each: the ring slot is reused
+        bodies = S.decode("Bodies", bytes(self.bodies))
+        return record_from_messages(bodies, S.decode("Contacts", bytes(self.contacts)))
 
 
 def _field_spans(buf, count: int) -> list[tuple[int, int]]:
@@ -332,7 +314,8 @@ def batch_frame_sizes(batch) -> np.ndarray:
     of 8) for an `isaac.engine.records.StepBatch`, as `frame_sizes` gives them one at a time."""
     from recorder.pack import HEAD_BYTES, frame_sizes_of
 
-    return frame_sizes_of(batch.first, batch.angle.shape[1], batch.offsets, HEAD_BYTES)
+    slot = batch.row_arrays[CONTACT_FIELDS.index("slot")]
+    return frame_sizes_of(batch.first, batch.angle.shape[1], batch.offsets, slot, HEAD_BYTES)
 
 
 def pack_batch(buf, pos: int, lo: int, hi: int, batch, sizes, model, gravity) -> int:
@@ -340,13 +323,11 @@ def pack_batch(buf, pos: int, lo: int, hi: int, batch, sizes, model, gravity) ->
     ``buf`` (uint8), by one compiled call (`recorder.pack.pack_frames`, with the /stats sums).
     sizes: `batch_frame_sizes`; model: ``mass``, ``inertia``, ``concrete`` arrays; gravity:
     (gx, gy) m/s^2. Returns the first step holding a NaN or an infinity, or hi."""
-    from isaac.engine.records import CONTACT_FIELDS
     from recorder.pack import pack_frames
 
     return pack_frames(
         buf, pos, lo, hi, batch.first, batch.dt, sizes, batch.offsets, batch.position,
-        batch.angle, batch.velocity, batch.angular_velocity, batch.exists,
-        *(a for f, a in zip(CONTACT_FIELDS, batch.row_arrays) if f != "pair_depth"),
+        batch.angle, batch.velocity, batch.angular_velocity, batch.exists, *batch.row_arrays,
         np.ascontiguousarray(model.mass, dtype=np.float64),
         np.ascontiguousarray(model.inertia, dtype=np.float64),
         np.ascontiguousarray(model.concrete, dtype=bool), *gravity,

@@ -38,7 +38,8 @@ from recorder import schema as S
 PROFILE = "isaac"
 LIBRARY = "isaac-recorder"
 FORMAT_NAME = "isaac-log"
-FORMAT_VERSION = "1"
+FORMAT_VERSION = "2"  # 2: /contacts per manifold (1: every field per point row)
+READ_FORMAT_VERSIONS = ("1", "2")  # what the readers take
 SCENE_ATTACHMENT = "scene.yaml"
 META_START = "isaac"
 META_END = "isaac.end"
@@ -171,7 +172,7 @@ def encode_bodies(record: StepRecord) -> bytes:
     return b"".join(parts)
 
 
-_CONTACT_WIRE = (
+_CONTACT_WIRE_V1 = (
     (3, "substep", "<u4"),
     (4, "a", "<u4"),
     (5, "b", "<u4"),
@@ -186,13 +187,88 @@ _CONTACT_WIRE = (
     (14, "tangent_impulse", "<f8"),
     (15, "restitution", "<f8"),
 )
+# format 2: (number, Contacts field, wire type), the manifold fields (taken from each
+# manifold's first row) then the point fields, in recorder.schema's order
+CONTACT_MANIFOLD_WIRE = (
+    (16, "substep", "<u4"),
+    (17, "a", "<u4"),
+    (18, "b", "<u4"),
+    (19, "feature", "<u4"),
+    (20, "points", "<u4"),
+    (21, "normal", "<f8"),
+    (22, "pair_depth", "<f8"),
+    (23, "push_a", "<f8"),
+    (24, "push_b", "<f8"),
+)
+CONTACT_POINT_WIRE = (
+    (8, "point", "<f8"),
+    (10, "depth", "<f8"),
+    (13, "impulse", "<f8"),
+    (14, "tangent_impulse", "<f8"),
+    (15, "restitution", "<f8"),
+)
+_PER_MANIFOLD = ("substep", "a", "b", "feature", "normal", "pair_depth")
+
+
+def manifold_starts(contacts) -> np.ndarray:
+    """The rows that begin a manifold (slot 0), as indices; ValueError unless the rows are
+    manifolds as the engine makes them: each begins at slot 0 and its later rows count up
+    (slot 1, ...), share its sub-step, bodies, feature, normal and pair depth bit for bit and
+    carry a +0.0 push. What format 2 stores once per manifold is then exactly what each row
+    held."""
+    c = contacts
+    m = len(c)
+    slot = np.asarray(c.slot)
+    starts = np.flatnonzero(slot == 0)
+    if m == 0:
+        return starts
+    first = np.zeros(m, dtype=np.int64)  # each row's manifold start
+    if starts.size == 0 or starts[0] != 0:
+        raise ValueError("contacts: row 0 does not begin a manifold (slot 0)")
+    first[starts] = starts
+    np.maximum.accumulate(first, out=first)
+    bad = slot != np.arange(m) - first
+    for name in _PER_MANIFOLD:
+        v = np.asarray(getattr(c, name))
+        if v.dtype.kind == "f":
+            v = np.ascontiguousarray(v, dtype="<f8").view(np.uint64)
+        v = v.reshape(m, -1)
+        bad |= (v != v[first]).any(axis=1)
+    later = slot != 0
+    for name in ("push_a", "push_b"):
+        v = np.ascontiguousarray(getattr(c, name), dtype="<f8").view(np.uint64).reshape(m, -1)
+        bad |= later & (v != 0).any(axis=1)
+    if bad.any():
+        row = int(np.flatnonzero(bad)[0])
+        raise ValueError(
+            f"contacts: row {row} (slot {int(slot[row])}) is not a point of the manifold "
+            f"beginning at row {int(first[row])} (its pair fields or push differ)"
+        )
+    return starts
 
 
 def encode_contacts(record: StepRecord) -> bytes:
-    """``isaac.log.Contacts``: every contact row of the step, column by column."""
+    """``isaac.log.Contacts`` (format 2): the step's manifolds, the pair fields once per
+    manifold and the point fields per point, column by column. ValueError if the rows are
+    not manifolds (`manifold_starts`)."""
+    c = record.contacts
+    starts = manifold_starts(c)
+    parts = [S.enc_uint(1, record.step), S.enc_double(2, record.time)]
+    points = np.diff(np.append(starts, len(c))).astype("<u4")
+    for number, name, dtype in CONTACT_MANIFOLD_WIRE:
+        values = points if name == "points" else np.asarray(getattr(c, name))[starts]
+        S.packed(parts, number, values, dtype)
+    for number, name, dtype in CONTACT_POINT_WIRE:
+        S.packed(parts, number, getattr(c, name), dtype)
+    return b"".join(parts)
+
+
+def encode_contacts_v1(record: StepRecord) -> bytes:
+    """``isaac.log.Contacts`` as format 1 wrote it (every field per row; no pair depth): for
+    comparing a replay with a format 1 log."""
     c = record.contacts
     parts = [S.enc_uint(1, record.step), S.enc_double(2, record.time)]
-    for number, name, dtype in _CONTACT_WIRE:
+    for number, name, dtype in _CONTACT_WIRE_V1:
         S.packed(parts, number, getattr(c, name), dtype)
     return b"".join(parts)
 

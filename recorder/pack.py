@@ -25,28 +25,21 @@ from numba.core import cgutils
 from numba.extending import intrinsic, overload
 
 from isaac.engine.diagnostics import _sums
+from isaac.engine.records import CONTACT_FIELDS as RECORD_CONTACT_FIELDS
 
-# the fields of Bodies (numbers 3-7) and Contacts (3-15), in the order of recorder.schema
+# the fields of Bodies (numbers 3-7), in the order of recorder.schema; CONTACT_FIELDS are the
+# record's (`isaac.engine.records.Contacts`): a NaN's field index is in BODY_FIELDS +
+# CONTACT_FIELDS
 BODY_FIELDS = ("position", "angle", "velocity", "angular_velocity", "exists")
-CONTACT_FIELDS = (
-    "substep",
-    "a",
-    "b",
-    "feature",
-    "slot",
-    "point",
-    "normal",
-    "depth",
-    "push_a",
-    "push_b",
-    "impulse",
-    "tangent_impulse",
-    "restitution",
-)
+CONTACT_FIELDS = RECORD_CONTACT_FIELDS
 BODY_ROW_BYTES = (16, 8, 16, 8, 1)
-CONTACT_ROW_BYTES = (4, 4, 4, 4, 4, 16, 16, 8, 16, 16, 8, 8, 8)
 BODY_ROW_BYTES_A = np.array(BODY_ROW_BYTES, dtype=np.int64)  # the same, for the kernel
-CONTACT_ROW_BYTES_A = np.array(CONTACT_ROW_BYTES, dtype=np.int64)
+# the Contacts message of format 2 (recorder.schema, recorder.mcap_writer.encode_contacts): its
+# fields' numbers in message order, the bytes each takes per manifold (the first
+# CONTACT_MANIFOLD_FIELDS) or per point (the rest)
+CONTACT_NUMBERS = np.array([16, 17, 18, 19, 20, 21, 22, 23, 24, 8, 10, 13, 14, 15], dtype=np.int64)
+CONTACT_UNIT_BYTES = np.array([4, 4, 4, 4, 4, 16, 8, 16, 16, 16, 8, 8, 8, 8], dtype=np.int64)
+CONTACT_MANIFOLD_FIELDS = 9
 
 
 @numba.njit(cache=True, nogil=True)
@@ -68,11 +61,33 @@ def _message_size(head, rows, row_bytes):
 
 
 @numba.njit(cache=True, nogil=True)
-def message_sizes(step: int, n: int, m: int) -> tuple[int, int]:
+def _contacts_size(head, m, k):
+    """Bytes of a format 2 Contacts message of k manifolds holding m points."""
+    size = head
+    for j in range(CONTACT_NUMBERS.shape[0]):
+        count = k if j < CONTACT_MANIFOLD_FIELDS else m
+        if count:
+            nbytes = count * CONTACT_UNIT_BYTES[j]
+            size += varint_size((CONTACT_NUMBERS[j] << 3) | 2) + varint_size(nbytes) + nbytes
+    return size
+
+
+@numba.njit(cache=True, nogil=True)
+def message_sizes(step: int, n: int, m: int, k: int) -> tuple[int, int]:
     """Exact byte sizes of the Bodies and Contacts messages of a step with n bodies and m
-    contact rows (compiled: the simulating process asks once per step)."""
+    contact points in k manifolds (compiled: the simulating process asks once per step)."""
     head = 1 + varint_size(step) + 1 + 8
-    return (_message_size(head, n, BODY_ROW_BYTES_A), _message_size(head, m, CONTACT_ROW_BYTES_A))
+    return (_message_size(head, n, BODY_ROW_BYTES_A), _contacts_size(head, m, k))
+
+
+@numba.njit(cache=True, nogil=True)
+def manifold_count(slot) -> int:
+    """The manifolds of a step's contact rows: the rows at slot 0."""
+    k = 0
+    for r in range(slot.shape[0]):
+        if slot[r] == 0:
+            k += 1
+    return k
 
 
 @numba.njit(cache=True, nogil=True)
@@ -167,6 +182,7 @@ def pack_layout(
     time,
     n,
     m,
+    k,
     contacts_at,
     position,
     angle,
@@ -176,6 +192,7 @@ def pack_layout(
     point,
     normal,
     depth,
+    pair_depth,
     push_a,
     push_b,
     impulse,
@@ -187,24 +204,26 @@ def pack_layout(
     gx,
     gy,
 ):
-    """Write the tags and lengths of Bodies at ``buf[base:]`` and of Contacts at
-    ``buf[base + contacts_at:]`` for n bodies and m contact rows.
+    """Write the tags and lengths of Bodies at ``buf[base:]`` and of Contacts (format 2) at
+    ``buf[base + contacts_at:]`` for n bodies and m contact points in k manifolds.
 
-    Returns (k, offsets, bodies bytes, contacts bytes, stats): offsets (18,) = where each field
-    of BODY_FIELDS + CONTACT_FIELDS puts its values (-1: left out, empty); k = -1, or the index
-    of the first float field holding a NaN or an infinity, in which case the frame must not be
-    sent; stats = (kinetic, potential energy, linear momentum x, y, angular momentum, max
-    depth, max impulse), as `recorder.stats.compute_stats` has them.
+    Returns (bad, offsets, bodies bytes, contacts bytes, stats): offsets (19,) = where each
+    field's values go, the 5 of BODY_FIELDS then the 14 of the Contacts message in its order
+    (`CONTACT_NUMBERS`; -1: left out, empty); bad = -1, or the index in BODY_FIELDS +
+    CONTACT_FIELDS of the first float field holding a NaN or an infinity, in which case the
+    frame must not be sent; stats = (kinetic, potential energy, linear momentum x, y, angular
+    momentum, max depth, max impulse), as `recorder.stats.compute_stats` has them.
     """
-    offsets = np.empty(18, dtype=np.int64)
+    offsets = np.empty(5 + CONTACT_NUMBERS.shape[0], dtype=np.int64)
     at = _head(buf, base, step, time)
-    for k in range(5):
-        at = _field(buf, at, 3 + k, n * BODY_ROW_BYTES_A[k], offsets, k)
+    for j in range(5):
+        at = _field(buf, at, 3 + j, n * BODY_ROW_BYTES_A[j], offsets, j)
     bodies_len = at - base
     start = base + contacts_at
     at = _head(buf, start, step, time)
-    for k in range(13):
-        at = _field(buf, at, 3 + k, m * CONTACT_ROW_BYTES_A[k], offsets, 5 + k)
+    for j in range(CONTACT_NUMBERS.shape[0]):
+        count = k if j < CONTACT_MANIFOLD_FIELDS else m
+        at = _field(buf, at, CONTACT_NUMBERS[j], count * CONTACT_UNIT_BYTES[j], offsets, 5 + j)
     contacts_len = at - start
     bad = -1
     if not _finite(position):
@@ -221,16 +240,18 @@ def pack_layout(
         bad = 11
     if bad < 0 and not _finite(depth):
         bad = 12
-    if bad < 0 and not _finite(push_a):
+    if bad < 0 and not _finite(pair_depth):
         bad = 13
-    if bad < 0 and not _finite(push_b):
+    if bad < 0 and not _finite(push_a):
         bad = 14
-    if bad < 0 and not _finite(impulse):
+    if bad < 0 and not _finite(push_b):
         bad = 15
-    if bad < 0 and not _finite(tangent_impulse):
+    if bad < 0 and not _finite(impulse):
         bad = 16
-    if bad < 0 and not _finite(restitution):
+    if bad < 0 and not _finite(tangent_impulse):
         bad = 17
+    if bad < 0 and not _finite(restitution):
+        bad = 18
     return (
         bad,
         offsets,
@@ -312,6 +333,27 @@ HEAD_BYTES = 120  # frames.FRAME_HEAD: step, time, n, m, 9 stats, 2 message leng
 
 
 @numba.njit(cache=True, nogil=True)
+def _starts(slot, k):
+    """The rows beginning a manifold (slot 0), k of them."""
+    out = np.empty(k, dtype=np.int64)
+    j = 0
+    for r in range(slot.shape[0]):
+        if slot[r] == 0:
+            out[j] = r
+            j += 1
+    return out
+
+
+@numba.njit(cache=True, nogil=True)
+def _gather(src, starts):
+    """src's rows at ``starts`` (a manifold's fields are its first row's), C-contiguous."""
+    out = np.empty((starts.shape[0],) + src.shape[1:], dtype=src.dtype)
+    for j in range(starts.shape[0]):
+        out[j] = src[starts[j]]
+    return out
+
+
+@numba.njit(cache=True, nogil=True)
 def pack_frame(
     buf,
     pos,
@@ -333,6 +375,7 @@ def pack_frame(
     point,
     normal,
     depth,
+    pair_depth,
     push_a,
     push_b,
     impulse,
@@ -347,12 +390,15 @@ def pack_frame(
     """A whole MCAP frame at byte ``pos`` (a multiple of 8) of ``buf`` (uint8): the head
     (frames.FRAME_HEAD, native = little-endian: step, time s, n, m, the nine /stats values,
     the two messages' lengths), the Bodies message at ``pos + HEAD_BYTES`` and the Contacts
-    message ``contacts_at`` bytes after it, in one call (`pack_layout`, then each field's values
-    by memcpy). The int arrays must be int32, ``exists`` bool.
+    message (format 2: the manifold fields from each manifold's first row, slot 0; the rows
+    must be manifolds as `recorder.mcap_writer.manifold_starts` checks) ``contacts_at`` bytes
+    after it, in one call (`pack_layout`, then each field's values by memcpy). The int arrays
+    must be int32, ``exists`` bool.
 
     Returns (k, bodies bytes, contacts bytes): k = -1, or the index of the first float field
     holding a NaN or an infinity (nothing then is fit to send).
     """
+    k = manifold_count(slot)
     bad, offsets, bodies_len, contacts_len, sums = pack_layout(
         buf,
         pos + HEAD_BYTES,
@@ -360,6 +406,7 @@ def pack_frame(
         time,
         n,
         m,
+        k,
         contacts_at,
         position,
         angle,
@@ -369,6 +416,7 @@ def pack_frame(
         point,
         normal,
         depth,
+        pair_depth,
         push_a,
         push_b,
         impulse,
@@ -387,19 +435,32 @@ def pack_frame(
     _put_values(buf, offsets[2], velocity)
     _put_values(buf, offsets[3], angular_velocity)
     _put_values(buf, offsets[4], exists)
-    _put_values(buf, offsets[5], substep)
-    _put_values(buf, offsets[6], a)
-    _put_values(buf, offsets[7], b)
-    _put_values(buf, offsets[8], feature)
-    _put_values(buf, offsets[9], slot)
-    _put_values(buf, offsets[10], point)
-    _put_values(buf, offsets[11], normal)
-    _put_values(buf, offsets[12], depth)
-    _put_values(buf, offsets[13], push_a)
-    _put_values(buf, offsets[14], push_b)
-    _put_values(buf, offsets[15], impulse)
-    _put_values(buf, offsets[16], tangent_impulse)
-    _put_values(buf, offsets[17], restitution)
+    if k:
+        starts = _starts(slot, k)
+        points = np.empty(k, dtype=np.int32)
+        for j in range(k - 1):
+            points[j] = starts[j + 1] - starts[j]
+        points[k - 1] = m - starts[k - 1]
+        _put_values(buf, offsets[5], _gather(substep, starts))
+        _put_values(buf, offsets[6], _gather(a, starts))
+        _put_values(buf, offsets[7], _gather(b, starts))
+        _put_values(buf, offsets[8], _gather(feature, starts))
+        _put_values(buf, offsets[9], points)
+        _put_values(buf, offsets[10], _gather(normal, starts))
+        _put_values(buf, offsets[11], _gather(pair_depth, starts))
+        _put_values(buf, offsets[12], _gather(push_a, starts))
+        _put_values(buf, offsets[13], _gather(push_b, starts))
+    _put_values(buf, offsets[14], point)
+    _put_values(buf, offsets[15], depth)
+    _put_values(buf, offsets[16], impulse)
+    _put_values(buf, offsets[17], tangent_impulse)
+    _put_values(buf, offsets[18], restitution)
+    # the padding after each message is zero, as `recorder.frames.pack` writes it (a ring
+    # slot holds an older frame's bytes)
+    body_end = pos + HEAD_BYTES + bodies_len
+    buf[body_end : pos + HEAD_BYTES + contacts_at] = 0
+    contacts_end = pos + HEAD_BYTES + contacts_at + contacts_len
+    buf[contacts_end : pos + HEAD_BYTES + contacts_at + ((contacts_len + 7) & ~7)] = 0
     ints = buf[pos : pos + HEAD_BYTES].view(np.int64)
     _write_head(buf[pos : pos + HEAD_BYTES].view(np.float64), ints, 0, step, time, n, m, sums)
     ints[13] = bodies_len
@@ -479,6 +540,7 @@ def pack_rerun(
     point,
     normal,
     depth,
+    pair_depth,
     push_a,
     push_b,
     impulse,
@@ -496,7 +558,7 @@ def pack_rerun(
 
     Returns -1, or the index (in BODY_FIELDS + CONTACT_FIELDS) of the first float field holding
     a NaN or an infinity; the frame must then not be sent. Fields the frame leaves out
-    (velocities, depth, tangent impulse, restitution) are checked all the same: the recorder's
+    (velocities, depths, tangent impulse, restitution) are checked all the same: the recorder's
     never-write-NaN check is this pass when the Rerun writer is the only one.
     """
     words = buf.view(np.float64)
@@ -518,11 +580,11 @@ def pack_rerun(
     if not _put_pairs(words, base + o[4], normal):
         bad = _first(bad, 11)
     if not _put(words, base + o[5], impulse):
-        bad = _first(bad, 15)
+        bad = _first(bad, 16)
     if not _put_pairs(words, base + o[6], push_a):
-        bad = _first(bad, 13)
-    if not _put_pairs(words, base + o[7], push_b):
         bad = _first(bad, 14)
+    if not _put_pairs(words, base + o[7], push_b):
+        bad = _first(bad, 15)
     # the floats the frame leaves out
     if not _finite(velocity):
         bad = _first(bad, 2)
@@ -530,10 +592,12 @@ def pack_rerun(
         bad = _first(bad, 3)
     if not _finite(depth):
         bad = _first(bad, 12)
+    if not _finite(pair_depth):
+        bad = _first(bad, 13)
     if not _finite(tangent_impulse):
-        bad = _first(bad, 16)
-    if not _finite(restitution):
         bad = _first(bad, 17)
+    if not _finite(restitution):
+        bad = _first(bad, 18)
     _write_head(
         words,
         ints,
@@ -561,14 +625,17 @@ def pack_rerun(
 
 # -- a batch of MCAP frames in one call --------------------------------------------------------
 @numba.njit(cache=True, nogil=True)
-def frame_sizes_of(first, n, offsets, head_bytes):
+def frame_sizes_of(first, n, offsets, slot, head_bytes):
     """Each step's (Bodies bytes, Contacts bytes, frame bytes) for a `StepBatch` whose first
-    record is step `first` (offsets: its row offsets), as `recorder.frames.frame_sizes` gives
-    them one at a time: a (steps, 3) int64 array."""
+    record is step `first` (offsets: its row offsets; slot: its rows' slots), as
+    `recorder.frames.frame_sizes` gives them one at a time: a (steps, 3) int64 array."""
     steps = offsets.shape[0] - 1
     out = np.empty((steps, 3), dtype=np.int64)
     for s in range(steps):
-        bodies, contacts = message_sizes(first + s, n, offsets[s + 1] - offsets[s])
+        r0 = offsets[s]
+        r1 = offsets[s + 1]
+        k = manifold_count(slot[r0:r1])
+        bodies, contacts = message_sizes(first + s, n, r1 - r0, k)
         out[s, 0] = bodies
         out[s, 1] = contacts
         out[s, 2] = head_bytes + ((bodies + 7) & ~7) + ((contacts + 7) & ~7)
@@ -578,8 +645,8 @@ def frame_sizes_of(first, n, offsets, head_bytes):
 @numba.njit(cache=True, nogil=True)
 def pack_frames(
     buf, pos, lo, hi, first, dt, sizes, offsets, position, angle, velocity, angular_velocity,
-    exists, substep, a, b, feature, slot, point, normal, depth, push_a, push_b, impulse,
-    tangent_impulse, restitution, mass, inertia, concrete, gx, gy,
+    exists, substep, a, b, feature, slot, point, normal, depth, pair_depth, push_a, push_b,
+    impulse, tangent_impulse, restitution, mass, inertia, concrete, gx, gy,
 ):  # fmt: skip
     """Steps lo .. hi - 1 of a batch (the arrays of `isaac.engine.driver.Batch`; step s is
     state index first + s at time (first + s) * dt s, as `StepBatch.record` computes it) as
@@ -596,8 +663,8 @@ def pack_frames(
             buf, at, step, step * dt, n, r1 - r0, (sizes[s, 0] + 7) & ~7, position[s], angle[s],
             velocity[s], angular_velocity[s], exists[s], substep[r0:r1], a[r0:r1], b[r0:r1],
             feature[r0:r1], slot[r0:r1], point[r0:r1], normal[r0:r1], depth[r0:r1],
-            push_a[r0:r1], push_b[r0:r1], impulse[r0:r1], tangent_impulse[r0:r1],
-            restitution[r0:r1], mass, inertia, concrete, gx, gy,
+            pair_depth[r0:r1], push_a[r0:r1], push_b[r0:r1], impulse[r0:r1],
+            tangent_impulse[r0:r1], restitution[r0:r1], mass, inertia, concrete, gx, gy,
         )  # fmt: skip
         if bad >= 0:
             return s

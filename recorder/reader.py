@@ -206,7 +206,59 @@ def record_from_messages(bodies: dict, contacts: dict) -> StepRecord:
 
 
 def contacts_from_message(msg: dict) -> Contacts:
-    """`Contacts` from a decoded `/contacts` message; ValueError if an array is not m long."""
+    """`Contacts` (one row per point) from a decoded `/contacts` message of either format
+    (`recorder.schema.decode`); ValueError if an array does not fit the counts. Format 2's
+    manifold fields are repeated on each of the manifold's rows (``slot`` counts the points of
+    a manifold from 0, a push sits on slot 0, the other rows' are +0.0); format 1 logs hold no
+    pair depth: it reads NaN."""
+    if "slot" in msg:
+        return _contacts_v1(msg)
+    k = msg["a"].size
+    per = f"{k} contact manifolds"
+
+    def manifold(key, width=1):
+        return _sized(msg, "/contacts", key, width * k, per)
+
+    counts = manifold("points").astype(np.int64)
+    if k and int(counts.min()) < 1:
+        raise ValueError(f"/contacts: manifold {int(np.argmin(counts))} has no point")
+    m = int(counts.sum())
+    what = f"{m} contact points"
+    starts = np.zeros(k, dtype=np.int64)
+    if k:
+        np.cumsum(counts[:-1], out=starts[1:])
+    of_row = np.repeat(np.arange(k), counts)
+    slot = (np.arange(m) - starts[of_row]).astype(np.int32)
+
+    def rows(key, dtype=None):
+        values = manifold(key)[of_row]
+        return values.astype(dtype) if dtype is not None else values
+
+    def pushes(key):
+        out = np.zeros((m, 2))
+        out[starts] = manifold(key, 2).reshape(k, 2)
+        return out
+
+    return Contacts(
+        substep=rows("substep", np.int32),
+        a=rows("a", np.int32),
+        b=rows("b", np.int32),
+        feature=rows("feature", np.int32),
+        slot=slot,
+        point=_sized(msg, "/contacts", "point", 2 * m, what).reshape(m, 2),
+        normal=manifold("normal", 2).reshape(k, 2)[of_row],
+        depth=_sized(msg, "/contacts", "point_depth", m, what),
+        pair_depth=rows("pair_depth"),
+        push_a=pushes("push_a"),
+        push_b=pushes("push_b"),
+        impulse=_sized(msg, "/contacts", "impulse", m, what),
+        tangent_impulse=_sized(msg, "/contacts", "tangent_impulse", m, what),
+        restitution=_sized(msg, "/contacts", "restitution", m, what),
+    )
+
+
+def _contacts_v1(msg: dict) -> Contacts:
+    """`Contacts` from a format 1 `/contacts` message (every field per row)."""
     m = msg["a"].size
     what = f"{m} contact rows"
 

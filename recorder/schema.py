@@ -67,19 +67,23 @@ MESSAGES: dict[str, list[tuple[str, int, str, bool]]] = {
         ("angular_velocity", 6, "double", True),  # (n,) rad/s
         ("exists", 7, "bool", True),  # (n,)
     ],
+    # format 2 (per manifold): a manifold is one pair's contact during one sub-step, its points
+    # follow one another in the point arrays (``points`` of them); numbers 3-7, 9, 11 and 12
+    # held format 1's per-row copies of the pair fields and are never used again
     "Contacts": [
         ("step", 1, "uint64", False),
         ("time", 2, "double", False),
-        ("substep", 3, "fixed32", True),
-        ("a", 4, "fixed32", True),
-        ("b", 5, "fixed32", True),
-        ("feature", 6, "fixed32", True),
-        ("slot", 7, "fixed32", True),
-        ("point", 8, "double", True),  # (m, 2) flattened, m, world
-        ("normal", 9, "double", True),  # (m, 2) flattened, unit, from a to b
-        ("depth", 10, "double", True),  # (m,) m
-        ("push_a", 11, "double", True),  # (m, 2) flattened, m, world
-        ("push_b", 12, "double", True),  # (m, 2) flattened, m, world
+        ("substep", 16, "fixed32", True),  # (k,) per manifold
+        ("a", 17, "fixed32", True),  # (k,) body index, a < b
+        ("b", 18, "fixed32", True),  # (k,)
+        ("feature", 19, "fixed32", True),  # (k,)
+        ("points", 20, "fixed32", True),  # (k,) points of the manifold (1 or 2)
+        ("normal", 21, "double", True),  # (k, 2) flattened, unit, from a to b
+        ("pair_depth", 22, "double", True),  # (k,) m, the pair's MTD depth
+        ("push_a", 23, "double", True),  # (k, 2) flattened, m, world
+        ("push_b", 24, "double", True),  # (k, 2) flattened, m, world
+        ("point", 8, "double", True),  # (m, 2) flattened, m, world; per point from here on
+        ("point_depth", 10, "double", True),  # (m,) m, the point's own penetration
         ("impulse", 13, "double", True),  # (m,) N s, >= 0
         ("tangent_impulse", 14, "double", True),  # (m,) N s, signed along (-n_y, n_x)
         ("restitution", 15, "double", True),  # (m,)
@@ -99,6 +103,30 @@ MESSAGES: dict[str, list[tuple[str, int, str, bool]]] = {
         ("state_hash", 12, "string", False),  # isaac.engine.diagnostics.state_hash, sha256 hex
     ],
 }
+
+# Format 1's Contacts (one row per contact point, every field per row), read from older logs
+# only: never written, and not in the schema stored in new logs.
+LEGACY_MESSAGES = {
+    "ContactsV1": [
+        ("step", 1, "uint64", False),
+        ("time", 2, "double", False),
+        ("substep", 3, "fixed32", True),
+        ("a", 4, "fixed32", True),
+        ("b", 5, "fixed32", True),
+        ("feature", 6, "fixed32", True),
+        ("slot", 7, "fixed32", True),
+        ("point", 8, "double", True),  # (m, 2) flattened, m, world
+        ("normal", 9, "double", True),  # (m, 2) flattened, unit, from a to b
+        ("depth", 10, "double", True),  # (m,) m
+        ("push_a", 11, "double", True),  # (m, 2) flattened, m, world
+        ("push_b", 12, "double", True),  # (m, 2) flattened, m, world
+        ("impulse", 13, "double", True),  # (m,) N s, >= 0
+        ("tangent_impulse", 14, "double", True),  # (m,) N s, signed along (-n_y, n_x)
+        ("restitution", 15, "double", True),  # (m,)
+    ],
+}
+# the field numbers only format 1 uses (a format 1 message holding a contact has some of them)
+CONTACTS_V1_ONLY = frozenset((3, 4, 5, 6, 7, 9, 11, 12))
 
 # topic -> message name (without package)
 TOPICS = {"/world": "World", "/bodies": "Bodies", "/contacts": "Contacts", "/stats": "Stats"}
@@ -254,8 +282,35 @@ def _read_varint(buf: bytes, pos: int) -> tuple[int, int]:
 
 _FIELDS_BY_NUMBER = {
     message: {number: (name, typ, repeated) for name, number, typ, repeated in fields}
-    for message, fields in MESSAGES.items()
+    for message, fields in {**MESSAGES, **LEGACY_MESSAGES}.items()
 }
+_SPECS = {**MESSAGES, **LEGACY_MESSAGES}
+
+
+def contacts_format(buf: bytes) -> int:
+    """1 when ``buf``, a Contacts message, is in format 1 (it holds a field only format 1 uses),
+    else 2. A message without contacts reads the same in both. WireError if it does not
+    parse."""
+    pos, end = 0, len(buf)
+    while pos < end:
+        key, pos = _read_varint(buf, pos)
+        number, wt = key >> 3, key & 7
+        if number in CONTACTS_V1_ONLY:
+            return 1
+        if wt == _WT_VARINT:
+            _, pos = _read_varint(buf, pos)
+        elif wt == _WT_I64:
+            pos += 8
+        elif wt == _WT_I32:
+            pos += 4
+        elif wt == _WT_LEN:
+            length, pos = _read_varint(buf, pos)
+            pos += length
+        else:
+            raise WireError(f"unsupported wire type {wt}")
+    return 2
+
+
 _NUMPY = {"double": "<f8", "fixed32": "<u4"}
 
 
@@ -264,7 +319,11 @@ def decode(message: str, buf: bytes) -> dict:
 
     Repeated numeric fields come back as numpy arrays (float64, uint32 or bool), empty when absent;
     a repeated nested message as a list of dicts. Accepts packed and unpacked encodings.
+    ``Contacts`` reads both formats: a format 1 message is decoded as ``ContactsV1`` (its dict
+    then has ``slot`` and ``depth``; a format 2 one has ``points`` and ``point_depth``).
     """
+    if message == "Contacts" and contacts_format(buf) == 1:
+        message = "ContactsV1"
     spec = _FIELDS_BY_NUMBER[message]
     parts: dict[str, list] = {}
     out: dict = {}
@@ -335,7 +394,7 @@ def decode(message: str, buf: bytes) -> dict:
             parts.setdefault(name, []).append(value)
         else:
             out[name] = value
-    for name, _number, typ, repeated in MESSAGES[message]:
+    for name, _number, typ, repeated in _SPECS[message]:
         if repeated:
             chunks = parts.get(name, [])
             if typ.startswith("message:"):

@@ -95,7 +95,7 @@ def ring_bytes_for(kind: str, n_bodies: int) -> int:
     ~3 contact rows per body."""
     from recorder.pack import message_sizes
 
-    estimate = FRAME_HEAD.size + sum(message_sizes(0, n_bodies, 3 * n_bodies)) + 16
+    estimate = FRAME_HEAD.size + sum(message_sizes(0, n_bodies, 3 * n_bodies, 3 * n_bodies)) + 16
     size = min(max(RING_FRAMES[kind] * estimate, RING_MIN), RING_MAX)
     return (size + mmap.PAGESIZE - 1) // mmap.PAGESIZE * mmap.PAGESIZE
 
@@ -401,6 +401,7 @@ class WriterProcess:
                 c.point,
                 c.normal,
                 c.depth,
+                c.pair_depth,
                 c.push_a,
                 c.push_b,
                 c.impulse,

@@ -40,6 +40,7 @@ from recorder.mcap_writer import (
     build_metadata,
     encode_bodies,
     encode_contacts,
+    encode_contacts_v1,
     encode_stats,
     encode_world,
 )
@@ -298,10 +299,12 @@ class StepEncoder:
     writer processes' `recorder.writer_process.pack_into`, tested byte for byte against the
     reference encoders; about 20 us on the 500-body pile against 70 us for `encode_bodies`,
     `encode_contacts` and `compute_stats`); elsewhere, and for a record holding a NaN or an
-    infinity (which the compiled path refuses), the reference encoders.
+    infinity (which the compiled path refuses), the reference encoders. For a log of format 1
+    (``contacts_format="1"``) ``/contacts`` is encoded as that format wrote it
+    (`recorder.mcap_writer.encode_contacts_v1`).
     """
 
-    def __init__(self, model, gravity: tuple[float, float]) -> None:
+    def __init__(self, model, gravity: tuple[float, float], contacts_format: str = "2") -> None:
         from types import SimpleNamespace
 
         self.model = model
@@ -313,8 +316,15 @@ class StepEncoder:
         )
         self._compiled = sys.byteorder == "little"
         self._buf = np.zeros(0, dtype=np.uint8)
+        self._v1 = contacts_format == "1"
 
     def encode(self, record: StepRecord) -> dict[str, bytes]:
+        out = self._encode(record)
+        if self._v1:
+            out["/contacts"] = encode_contacts_v1(record)
+        return out
+
+    def _encode(self, record: StepRecord) -> dict[str, bytes]:
         from recorder.frames import Frame, frame_size, pack_into
 
         if self._compiled:
@@ -389,7 +399,7 @@ def replay_log(
     model = sim.model
     names = list(model.names)
     gravity = tuple(float(g) for g in scene.world.gravity)
-    encoder = StepEncoder(model, gravity)
+    encoder = StepEncoder(model, gravity, log.format_version)
     report = Report(mode="replay", logs=[str(path)], tolerance=tolerance, max_reported=max_reported)
     report.notes.extend(notes)
     here = build_metadata(scene, "", len(names))

@@ -197,6 +197,93 @@ class _Finder:
         return self.first
 
 
+# the fields compared, per row (a manifold's fields on each of its rows), in format 2's message
+# order: (record field, name in a format 2 log, name in a format 1 log; None: not in it)
+_CONTACT_COMPARED = (
+    ("substep", "substep", "substep"),
+    ("a", "a", "a"),
+    ("b", "b", "b"),
+    ("feature", "feature", "feature"),
+    ("points", "points", None),
+    ("slot", None, "slot"),
+    ("normal", "normal", "normal"),
+    ("pair_depth", "pair_depth", None),
+    ("push_a", "push_a", "push_a"),
+    ("push_b", "push_b", "push_b"),
+    ("point", "point", "point"),
+    ("depth", "point_depth", "depth"),
+    ("impulse", "impulse", "impulse"),
+    ("tangent_impulse", "tangent_impulse", "tangent_impulse"),
+    ("restitution", "restitution", "restitution"),
+)
+
+
+def _row_values(c, name: str) -> np.ndarray:
+    """A Contacts field as compared, flattened; ``points``: each row's manifold's size."""
+    if name == "points":
+        starts = np.flatnonzero(np.asarray(c.slot) == 0)
+        counts = np.diff(np.append(starts, len(c)))
+        return np.repeat(counts, counts)
+    return np.ravel(getattr(c, name))
+
+
+def _locate_contacts(f: _Finder, step: int, dl: dict, dr: dict, names: list):
+    """The /contacts branch of `locate`: both messages (of either format) as rows, compared
+    field by field (a manifold's field on each of its rows: a change shows at the manifold's
+    first row). Returns a count Divergence, or None after filling ``f``."""
+    cl, cr = contacts_from_message(dl), contacts_from_message(dr)
+    v1 = "slot" in dl or "slot" in dr  # a format 1 log on one side: its fields only
+    ml, mr = len(cl), len(cr)
+    manifold_l = np.cumsum(np.asarray(cl.slot) == 0) - 1
+
+    def row(i: int) -> dict:
+        c = {"row": i}
+        for k in _CONTACT_KEY:
+            v = getattr(cl, k)
+            c[k] = int(v[i]) if i < v.size else None
+        if "slot" not in dl and i < ml:
+            c["manifold"] = int(manifold_l[i])
+        for side in ("a", "b"):
+            j = c[side]
+            if j is not None and 0 <= j < len(names):
+                c[f"{side}_name"] = str(names[j])
+        return {"contact": c}
+
+    if ml != mr:
+        # the first row whose identity (sub-step, a, b, slot) differs says where it starts
+        m = min(ml, mr)
+        keys_l = np.stack([getattr(cl, k)[:m].astype(np.int64) for k in _CONTACT_KEY])
+        keys_r = np.stack([getattr(cr, k)[:m].astype(np.int64) for k in _CONTACT_KEY])
+        off = np.flatnonzero((keys_l != keys_r).any(axis=0))
+        i = int(off[0]) if off.size else m
+        where = row(i)["contact"] if i < ml else None
+        detail = f"the rows agree up to row {i - 1}" if i > 0 else "row 0 already differs"
+        if where is not None:
+            detail += (
+                f"; logged row {i} is {where.get('a_name', where['a'])!r}-"
+                f"{where.get('b_name', where['b'])!r} slot {where['slot']}"
+            )
+        return Divergence(
+            step,
+            "/contacts",
+            "count",
+            field="contacts",
+            logged=ml,
+            replayed=mr,
+            contact=where,
+            detail=detail,
+        )
+    f.scalar("step", dl["step"], dr["step"], is_float=False)
+    f.scalar("time", dl["time"], dr["time"], is_float=True)
+    for name, v2_name, v1_name in _CONTACT_COMPARED:
+        label = v1_name if v1 else v2_name
+        if label is None:
+            continue
+        lv, rv = _row_values(cl, name), _row_values(cr, name)
+        f.array(label, lv, rv, is_float=lv.dtype.kind == "f", where=row)
+    return None
+
+
 def check_payload(topic: str, payload: bytes, n_bodies: int) -> None:
     """MalformedMessage unless ``payload`` decodes as ``topic`` with arrays that fit together
     (for payloads equal on both sides of a diff, which `locate` never sees)."""
@@ -236,47 +323,9 @@ def locate(
             else:
                 f.scalar(name, dl[name], dr[name], is_float=typ == "double")
     elif topic == "/contacts":
-        ml, mr = dl["a"].size, dr["a"].size
-
-        def row(i: int) -> dict:
-            c = {"row": i}
-            for k in _CONTACT_KEY:
-                c[k] = int(dl[k][i]) if i < dl[k].size else None
-            for side in ("a", "b"):
-                j = c[side]
-                if j is not None and 0 <= j < len(names):
-                    c[f"{side}_name"] = str(names[j])
-            return {"contact": c}
-
-        if ml != mr:
-            # the first row whose identity (sub-step, a, b, slot) differs says where it starts
-            m = min(ml, mr)
-            keys_l = np.stack([dl[k][:m].astype(np.int64) for k in _CONTACT_KEY])
-            keys_r = np.stack([dr[k][:m].astype(np.int64) for k in _CONTACT_KEY])
-            off = np.flatnonzero((keys_l != keys_r).any(axis=0))
-            i = int(off[0]) if off.size else m
-            where = row(i)["contact"] if i < ml else None
-            detail = f"the rows agree up to row {i - 1}" if i > 0 else "row 0 already differs"
-            if where is not None:
-                detail += (
-                    f"; logged row {i} is {where.get('a_name', where['a'])!r}-"
-                    f"{where.get('b_name', where['b'])!r} slot {where['slot']}"
-                )
-            return Divergence(
-                step,
-                topic,
-                "count",
-                field="contacts",
-                logged=ml,
-                replayed=mr,
-                contact=where,
-                detail=detail,
-            ), None
-        for name, _num, typ, repeated in spec:
-            if repeated:
-                f.array(name, dl[name], dr[name], is_float=typ == "double", where=row)
-            else:
-                f.scalar(name, dl[name], dr[name], is_float=typ == "double")
+        d = _locate_contacts(f, step, dl, dr, names)
+        if d is not None:
+            return d, None
     elif topic == "/stats":
         for name, _num, typ, _repeated in spec:
             f.scalar(name, dl[name], dr[name], is_float=typ == "double")

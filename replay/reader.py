@@ -26,7 +26,7 @@ from dataclasses import dataclass
 
 from isaac.errors import LogError
 from recorder.integrity import STEP_TOPICS, TOPICS, Damage, StepReader
-from recorder.mcap_writer import FORMAT_VERSION
+from recorder.mcap_writer import READ_FORMAT_VERSIONS
 from recorder.reader import LogReader
 
 __all__ = ["STEP_TOPICS", "TOPICS", "Damage", "Prefetch", "RawLog", "RawStep"]
@@ -74,11 +74,12 @@ class RawLog:
         self.read_through = False
         self.complete = False
         version = self.metadata.get("format_version")
-        if version != FORMAT_VERSION:
+        if version not in READ_FORMAT_VERSIONS:
             raise LogError(
                 f"{self.path}: log format version {version!r} is not supported "
-                f"(this version reads {FORMAT_VERSION!r})"
+                f"(this version reads {', '.join(map(repr, READ_FORMAT_VERSIONS))})"
             )
+        self.format_version = version  # "1": /contacts one row per point; "2": per manifold
 
     @property
     def scene_text(self) -> str:

@@ -60,8 +60,9 @@ class Divergence:
         if self.contact is not None:
             c = self.contact
             pair = f"{c.get('a_name', c.get('a'))!r}-{c.get('b_name', c.get('b'))!r}"
+            manifold = f"manifold {c['manifold']}, " if c.get("manifold") is not None else ""
             return (
-                f"contact row {c['row']} ({pair}, sub-step {c.get('substep')}, "
+                f"contact row {c['row']} ({manifold}{pair}, sub-step {c.get('substep')}, "
                 f"slot {c.get('slot')})"
             )
         return ""

@@ -50,9 +50,17 @@ def test_body_filter_keeps_only_that_bodys_contacts(log):
     done = _isaac("inspect", str(log), "--step", "10", "--body", "left", "--format", "csv")
     assert done.returncode == 0, done.stderr
     rows = list(csv.reader(io.StringIO(done.stdout)))
-    assert rows[0][:4] == ["row", "sub", "a", "b"]
+    assert rows[0][:5] == ["row", "m", "sub", "a", "b"]
     assert [int(r[0]) for r in rows[1:]] == expected
-    assert all("1:left" in (r[2], r[3]) for r in rows[1:])
+    assert all("1:left" in (r[3], r[4]) for r in rows[1:])
+    # a manifold's rows name one manifold; its pair depth is its own, the points' depths theirs
+    head = rows[0]
+    m, pair, point = head.index("m"), head.index("pair_depth"), head.index("point_depth")
+    for r in rows[1:]:
+        i = int(r[0])
+        assert float(r[pair]) == pytest.approx(c.pair_depth[i], rel=1e-5, abs=1e-12)
+        assert float(r[point]) == pytest.approx(c.depth[i], rel=1e-5, abs=1e-12)
+    assert len({r[m] for r in rows[1:]}) < len(rows) - 1  # two points share a manifold
 
 
 def test_json_carries_the_logged_values_exactly(log):
@@ -64,7 +72,11 @@ def test_json_carries_the_logged_values_exactly(log):
     got = json.loads(done.stdout)
     assert got["step"] == 10 and got["bodies"]["name"] == ["ground", "left", "right"]
     assert got["bodies"]["position_m"] == logged.record.position.tolist()
-    assert got["contacts"]["impulse_Ns"] == logged.record.contacts.impulse.tolist()
+    c = logged.record.contacts
+    assert got["contacts"]["impulse_Ns"] == c.impulse.tolist()
+    assert got["contacts"]["pair_depth_m"] == c.pair_depth.tolist()
+    assert got["contacts"]["point_depth_m"] == c.depth.tolist()
+    assert got["contacts"]["manifold"][-1] == int((c.slot == 0).sum()) - 1
     assert got["stats"]["state_hash"] == logged.stats["state_hash"]
 
 

@@ -13,8 +13,8 @@ UNITS = {"B": 1, "kB": 1e3, "MB": 1e6, "GB": 1e9}
 def test_a_recorded_run_first_says_how_large_its_log_will_be(tmp_path):
     out = tmp_path / "pile.mcap"
     run = subprocess.run(
-        [sys.executable, "-m", "isaac", "run", "scenes/pile.yaml", "--steps", "400", "--quiet",
-         "--mcap", str(out)],
+        [sys.executable, "-m", "isaac", "run", "scenes/pile.yaml", "--steps", "600", "--quiet",
+         "--mcap", str(out), "--compression", "none"],
         capture_output=True, text=True, timeout=600,
     )  # fmt: skip
     assert run.returncode == 0, run.stderr

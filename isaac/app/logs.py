@@ -158,22 +158,26 @@ def _inspect(args: argparse.Namespace) -> int:
     return 0
 
 
+# one row per contact point; m and the columns up to push_b_y are its manifold's (the pair's,
+# stored once per manifold in the log), the rest the point's own
 _COLUMNS = (
     "row",
+    "m",
     "sub",
     "a",
     "b",
     "slot",
     "feature",
-    "point_x",
-    "point_y",
     "normal_x",
     "normal_y",
-    "depth",
+    "pair_depth",
     "push_a_x",
     "push_a_y",
     "push_b_x",
     "push_b_y",
+    "point_x",
+    "point_y",
+    "point_depth",
     "impulse",
     "tangent_imp",
     "e",
@@ -194,27 +198,39 @@ def _logged_step(log, k: int):
         raise LogError(f"{log.path}: step {k} is not in the log (it holds {held})") from None
 
 
+def _manifolds(c):
+    """Each contact row's manifold (its index among the step's manifolds, as the log stores
+    them: a manifold begins at slot 0)."""
+    import numpy as np
+
+    return np.cumsum(np.asarray(c.slot) == 0) - 1
+
+
 def _contact_rows(c, names, keep) -> list[tuple[str, ...]]:
+    """The table's rows (`_COLUMNS`) of the contact rows ``keep``."""
     rows = []
+    manifold = _manifolds(c)
     for i in keep:
         a, b = int(c.a[i]), int(c.b[i])
         rows.append(
             (
                 str(i),
+                str(int(manifold[i])),
                 str(int(c.substep[i])),
                 f"{a}:{names[a]}",
                 f"{b}:{names[b]}",
                 str(int(c.slot[i])),
                 str(int(c.feature[i])),
-                _g(c.point[i, 0]),
-                _g(c.point[i, 1]),
                 _g(c.normal[i, 0]),
                 _g(c.normal[i, 1]),
-                _g(c.depth[i]),
+                _g(c.pair_depth[i]),
                 _g(c.push_a[i, 0]),
                 _g(c.push_a[i, 1]),
                 _g(c.push_b[i, 0]),
                 _g(c.push_b[i, 1]),
+                _g(c.point[i, 0]),
+                _g(c.point[i, 1]),
+                _g(c.depth[i]),
                 _g(c.impulse[i]),
                 _g(c.tangent_impulse[i]),
                 _g(c.restitution[i]),
@@ -257,7 +273,10 @@ def _print_step(log, k: int, *, body: str | None = None, form: str = "table") ->
     print("  ".join(h.rjust(wd) for h, wd in zip(_COLUMNS, widths)))
     for row in rows:
         print("  ".join(x.rjust(wd) for x, wd in zip(row, widths)))
-    print("units: m (point, depth, push), N s (impulse, tangent_imp); normal from a to b")
+    print(
+        "units: m (point, depths, push), N s (impulse, tangent_imp); normal from a to b; "
+        "pair_depth: the pair's MTD, point_depth: the point's own penetration"
+    )
     return 0
 
 
@@ -283,6 +302,7 @@ def _print_step_json(logged, names, keep) -> int:
         },
         "contacts": {
             "row": keep,
+            "manifold": rows(_manifolds(c)),
             "substep": rows(c.substep),
             "a": rows(c.a),
             "b": rows(c.b),
@@ -290,7 +310,8 @@ def _print_step_json(logged, names, keep) -> int:
             "feature": rows(c.feature),
             "point_m": rows(c.point),
             "normal": rows(c.normal),
-            "depth_m": rows(c.depth),
+            "pair_depth_m": [None if x != x else x for x in rows(c.pair_depth)],
+            "point_depth_m": rows(c.depth),
             "push_a_m": rows(c.push_a),
             "push_b_m": rows(c.push_b),
             "impulse_Ns": rows(c.impulse),

@@ -69,7 +69,7 @@ def make_contacts(rng, n: int, m: int) -> Contacts:
     normal = np.stack([np.cos(ang), np.sin(ang)], axis=1)
     slot = np.zeros(m, dtype=np.int32)
     push_a = rng.normal(0, 1e-3, (m, 2))
-    return Contacts(
+    c = dict(
         substep=np.zeros(m, dtype=np.int32),
         a=a,
         b=b,
@@ -85,6 +85,17 @@ def make_contacts(rng, n: int, m: int) -> Contacts:
         tangent_impulse=rng.normal(0, 0.1, m),
         restitution=rng.uniform(0, 1, m),
     )
+    # about a third of the rows are the second point of the manifold before them (as the
+    # engine makes them: the pair's fields repeated, slot 1, no push)
+    second = rng.uniform(0, 1, m) < 0.35
+    for i in range(1, m):
+        if second[i] and slot[i - 1] == 0:
+            slot[i] = 1
+            for name in ("substep", "a", "b", "feature", "normal", "pair_depth"):
+                c[name][i] = c[name][i - 1]
+            c["push_a"][i] = 0.0
+            c["push_b"][i] = 0.0
+    return Contacts(**c)
 
 
 class SynthSim:

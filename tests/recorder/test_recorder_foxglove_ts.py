@@ -95,3 +95,24 @@ def test_every_channel_decodes_with_foxglove_typescript_stack_bit_for_bit(tmp_pa
         assert np.array_equal(
             np.array(js["angularVelocity"], dtype=np.float64), logged.angular_velocity
         )
+    # /contacts (format 2): the manifold fields once per manifold, the point fields per point
+    js = decoded["contacts"]
+    assert js is not None
+    c = next(s.record.contacts for s in steps if s.record.step == js["step"])
+    first = c.slot == 0
+    assert np.array_equal(np.array(js["points"]), np.diff(np.append(np.flatnonzero(first), len(c))))
+    assert (np.array(js["points"]) == 2).any()  # a two-point manifold among them
+    for name in ("substep", "a", "b", "feature"):
+        assert np.array_equal(np.array(js[name], dtype=np.int64), getattr(c, name)[first]), name
+    for name in ("normal", "pair_depth", "push_a", "push_b"):
+        want = getattr(c, name)[first].reshape(-1)
+        assert np.array_equal(np.array(js[name], dtype=np.float64), want), name
+    for name, ours in (
+        ("point", "point"),
+        ("point_depth", "depth"),
+        ("impulse", "impulse"),
+        ("tangent_impulse", "tangent_impulse"),
+        ("restitution", "restitution"),
+    ):
+        want = getattr(c, ours).reshape(-1)
+        assert np.array_equal(np.array(js[name], dtype=np.float64), want), name

@@ -138,7 +138,9 @@ def test_logged_collisions_match_the_seed_formulas(tmp_path, name):
         # depth: the overlap of the polygons at the poses logged on the step before
         va = _world_vertices(local[a], p0[a], ang0[a])
         vb = _world_vertices(local[b], p0[b], ang0[b])
-        assert c.depth[0] == pytest.approx(_overlap(va, vb), abs=1e-9)
+        # (one point: the pair's MTD and the point's own depth are the same number)
+        assert c.pair_depth[0] == pytest.approx(_overlap(va, vb), abs=1e-9)
+        assert c.point_depth[0] == c.pair_depth[0]
         # the push separates them (the seed's full MTD push: touching, no overlap left)
         pa_hit, pb_hit = p0[a] + push_a, p0[b] + push_b
         after = _overlap(

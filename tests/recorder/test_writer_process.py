@@ -35,8 +35,6 @@ def _assert_same_record(a: StepRecord, b: StepRecord):
     for name in ("position", "angle", "velocity", "angular_velocity", "exists"):
         np.testing.assert_array_equal(getattr(a, name), getattr(b, name))
     for f in dataclasses.fields(Contacts):
-        if f.name == "pair_depth":  # not logged yet
-            continue
         x, y = getattr(a.contacts, f.name), getattr(b.contacts, f.name)
         assert x.shape == y.shape and x.dtype.kind == y.dtype.kind
         np.testing.assert_array_equal(x, y)
@@ -99,7 +97,7 @@ def test_the_compiled_encoder_writes_the_reference_encoders_bytes_and_stats():
 
 
 @pytest.mark.parametrize(
-    "field", ["position", "angular_velocity", "normal", "impulse", "restitution"]
+    "field", ["position", "angular_velocity", "normal", "pair_depth", "impulse", "restitution"]
 )
 @pytest.mark.parametrize("bad", [np.nan, np.inf])
 def test_the_compiled_encoder_refuses_a_nan_or_infinity_in_any_float_field(field, bad):
@@ -117,6 +115,7 @@ def test_the_compiled_encoder_refuses_a_nan_or_infinity_in_any_float_field(field
         0.05,
         len(r.angle),
         len(c),
+        int((c.slot == 0).sum()),
         4096,
         r.position,
         r.angle,
@@ -126,6 +125,7 @@ def test_the_compiled_encoder_refuses_a_nan_or_infinity_in_any_float_field(field
         c.point,
         c.normal,
         c.depth,
+        c.pair_depth,
         c.push_a,
         c.push_b,
         c.impulse,
@@ -181,6 +181,7 @@ def test_the_rerun_frame_round_trips_every_field_bit_for_bit():
                 c.point,
                 c.normal,
                 c.depth,
+                c.pair_depth,
                 c.push_a,
                 c.push_b,
                 c.impulse,
@@ -214,6 +215,7 @@ _FLOAT_FIELDS = (
     "point",
     "normal",
     "depth",
+    "pair_depth",
     "push_a",
     "push_b",
     "impulse",
@@ -250,6 +252,7 @@ def test_the_rerun_frame_refuses_a_nan_or_infinity_in_any_float_field(field, bad
         c.point,
         c.normal,
         c.depth,
+        c.pair_depth,
         c.push_a,
         c.push_b,
         c.impulse,

@@ -24,6 +24,7 @@ import pytest
 
 from isaac.app.cli import main
 from isaac.errors import LogError, SceneError
+from recorder import schema as S
 from recorder.reader import LogReader, recover
 from replay.compare import diff_logs, replay_log
 from replay.report import format_text
@@ -32,6 +33,7 @@ sys.path.insert(0, str(Path(__file__).parent))
 from mcap_surgery import (  # noqa: E402
     STEPS,
     abandoned_log,
+    crafted,
     layout,
     rewrite,
     small_log,
@@ -333,3 +335,47 @@ def test_inspect_and_recover_report_the_same_damage(clean, tmp_path, capsys):
     assert verdict(fixed)[0] == 0
     assert [s.step for s in LogReader(str(fixed)).steps()] == list(range(30))
     assert recover(str(clean), str(tmp_path / "copy.mcap")).lost is None
+
+
+# every field of the /contacts message (format 2): the manifold fields, once per manifold, and
+# the point fields; the untouched values of step 50: two manifolds of two points each
+_CONTACT_FIELDS = [
+    (name, typ) for name, _n, typ, repeated in S.MESSAGES["Contacts"] if repeated
+] + [("step", "uint64"), ("time", "double")]
+
+
+@pytest.mark.parametrize("field,typ", _CONTACT_FIELDS, ids=[f for f, _ in _CONTACT_FIELDS])
+def test_an_edit_to_any_manifold_or_point_field_is_caught(clean, tmp_path, field, typ):
+    k = STEPS
+    seen = {}
+
+    def change(d):
+        assert list(d["points"]) == [2, 2]  # manifolds of two points: a second point is edited
+        seen["before"] = d[field]
+        if typ == "double" and field != "time":
+            values = np.array(d[field])
+            values[-1] = np.nextafter(values[-1], np.inf)  # one ULP (from 0.0: a subnormal)
+            d[field] = values
+        elif field == "time":
+            d[field] = float(np.nextafter(d[field], np.inf))
+        elif field == "step":
+            d[field] = d[field] + 1
+        elif field == "points":
+            d[field] = np.array([1, 3], dtype=np.uint32)  # the same points, regrouped
+        else:
+            values = np.array(d[field])
+            values[-1] += 1
+            d[field] = values
+
+    bad = rewrite(clean, tmp_path / "bad.mcap", crafted("/contacts", k, change))
+    assert "before" in seen
+    status, text = verdict(bad)
+    assert status in (1, 2), text
+    assert f"step {k}" in text, text
+    if status == 1 and field not in ("step", "points", "a", "b"):
+        report = replay_log(str(bad))
+        d = report.divergences[0]
+        assert (d.step, d.channel) == (k, "/contacts")
+        assert d.field.split(".")[0] == field, d
+        if typ == "double" and field != "time":
+            assert d.ulps == 1 or d.logged == 0.0

@@ -1,7 +1,8 @@
 // Decode every message of an ISAAC MCAP log with Foxglove's TypeScript stack (@mcap/core's
 // indexed reader, protobufjs built from the FileDescriptorSet stored as each channel's schema)
-// and print, as JSON, the message count per topic and every float of the first and last
-// /bodies message, for tests/recorder/test_recorder_foxglove_ts.py to compare bit for bit.
+// and print, as JSON, the message count per topic, every float of the first and last /bodies
+// message and every field of the last /contacts message holding contacts (per manifold and per
+// point, format 2), for tests/recorder/test_recorder_foxglove_ts.py to compare bit for bit.
 import { McapIndexedReader } from "@mcap/core";
 import protobuf from "protobufjs";
 import descriptor from "protobufjs/ext/descriptor/index.js";
@@ -25,16 +26,26 @@ for (const [id, schema] of reader.schemasById) {
 }
 const counts = {};
 const bodies = [];
+let contacts = null;
 for await (const msg of reader.readMessages()) {
   const channel = reader.channelsById.get(msg.channelId);
   const type = types.get(channel.schemaId);
   const decoded = type.toObject(type.decode(msg.data), { longs: String, defaults: true });
   counts[channel.topic] = (counts[channel.topic] ?? 0) + 1;
   if (channel.topic === "/bodies") bodies.push(decoded);
+  if (channel.topic === "/contacts" && decoded.a.length) contacts = decoded;
 }
 const pick = (m) => ({ step: Number(m.step), position: m.position, velocity: m.velocity,
                       angle: m.angle,
                       angularVelocity: m.angularVelocity ?? m.angular_velocity });
+// protobufjs names a field by its name or its JSON name, depending on how the root was built
+const field = (m, snake) => m[snake] ?? m[snake.replace(/_(.)/g, (_, c) => c.toUpperCase())];
+const CONTACT_FIELDS = ["substep", "a", "b", "feature", "points", "normal", "pair_depth",
+                        "push_a", "push_b", "point", "point_depth", "impulse", "tangent_impulse",
+                        "restitution"];
+const pickContacts = (m) => Object.fromEntries(
+  [["step", Number(m.step)], ...CONTACT_FIELDS.map((f) => [f, field(m, f)])]);
 // numbers are written by JSON.stringify as the shortest round-trip decimal, as Python's repr
-console.log(JSON.stringify({ counts, first: pick(bodies[0]), last: pick(bodies.at(-1)) }));
+console.log(JSON.stringify({ counts, first: pick(bodies[0]), last: pick(bodies.at(-1)),
+                             contacts: contacts && pickContacts(contacts) }));
 await fh.close();
