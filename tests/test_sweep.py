@@ -229,6 +229,50 @@ def test_tunneling_is_counted_without_ccd_and_not_with_it(tmp_path, cluster):
     assert by_ccd["speculative"]["tunneled"] == 0 and by_ccd["speculative"]["contacts"] > 0
 
 
+@pytest.mark.parametrize("prefilter", [True, False], ids=["bounding boxes first", "every path"])
+def test_the_tunneling_metric_clips_only_paths_near_a_concrete_body_and_agrees_with_all(
+    prefilter, monkeypatch
+):
+    from types import SimpleNamespace
+
+    from isaac.app.sweep import metrics
+    from isaac.app.sweep.metrics import Measure
+    from isaac.app.tradeoff.trajectory import _crossed_concrete
+    from isaac.engine.simulation import Simulation
+    from isaac.scene import load_scene_text
+
+    movers = "".join(
+        f"  - {{name: b{i}, shape: {{box: [0.1, 0.1]}}, position: [{i - 4}, 5]}}\n"
+        for i in range(8)
+    )
+    scene = load_scene_text(
+        "world: {steps: 1}\n"
+        "bodies:\n"
+        "  - {name: wall, shape: {box: [0.1, 3.0]}, position: [2.0, 1.0], angle: 0.7,"
+        " concrete: true}\n"
+        "  - {name: floor, shape: {polygon: [[-5, -1], [5, -1], [4, 0], [-4, 0]]},"
+        " concrete: true}\n" + movers
+    )
+    monkeypatch.setattr(metrics, "PREFILTER_PATHS", 0 if prefilter else 10**9)
+    m = Measure(Simulation(scene), ["tunneled"], [])
+    rng = np.random.default_rng(5)
+    n = len(scene.bodies)
+    hits = misses = 0
+    for _ in range(300):
+        # one step of paths of every length and place: through, into, past or far from the two
+        start = rng.uniform(-6.0, 6.0, (n, 2))
+        end = start + rng.uniform(-3.0, 3.0, (n, 2)) * rng.uniform(0.0, 1.0, (n, 1))
+        m.tunneled[:] = False
+        m.last = SimpleNamespace(position=start, exists=np.ones(n, dtype=bool))
+        m._tunneling(SimpleNamespace(position=end[None], exists=np.ones((1, n), dtype=bool)))
+        want = _crossed_concrete(m.planes, start, end) & np.asarray(m.movable)
+        assert (m.tunneled == want).all()
+        hits += int(want.sum())
+        misses += int((~want & np.asarray(m.movable)).sum())
+    assert hits > 100 and misses > 100
+    assert (m._boxes is not None) == prefilter
+
+
 def test_a_diverging_run_is_a_failed_row_and_the_others_complete(tmp_path, cluster, capsys):
     _, client = cluster
     scene = _write(
