@@ -43,15 +43,15 @@ def _pad8(n: int) -> int:
 
 def frame_sizes(record: StepRecord) -> tuple[int, int, int]:
     """Bytes of `record`'s Bodies and Contacts messages, and of its frame (a multiple of 8)."""
-    from recorder.pack import manifold_count, message_sizes
+    from recorder.pack import manifold_counts, message_sizes
 
     c = record.contacts
-    bodies, contacts = message_sizes(
-        int(record.step),
-        int(record.angle.shape[0]),
-        len(c),
-        manifold_count(np.asarray(c.slot, dtype=np.int32)) if len(c) else 0,
+    k, p = (
+        manifold_counts(np.asarray(c.slot, dtype=np.int32), c.push_a, c.push_b)
+        if len(c)
+        else (0, 0)
     )
+    bodies, contacts = message_sizes(int(record.step), int(record.angle.shape[0]), len(c), k, p)
     return bodies, contacts, FRAME_HEAD.size + _pad8(bodies) + _pad8(contacts)
 
 
@@ -60,18 +60,20 @@ def frame_sizes(record: StepRecord) -> tuple[int, int, int]:
 # first 400 steps of the 503-body pile)
 ROWS_PER_MOVING_BODY = 2.0
 POINTS_PER_MANIFOLD = 1.3
+PUSHED_SHARE = 0.75  # of the manifolds: 0.006 on the default scene, 0.76 on the pile
 STEP_OVERHEAD_BYTES = 400  # /stats message, the MCAP message records and the chunk index share
 
 
 def expected_log_bytes(n_bodies: int, n_moving: int, steps: int) -> tuple[int, int]:
     """(bytes a step, bytes) an MCAP log of `steps` steps (after step 0) is expected to take,
     uncompressed: the exact /bodies size and /contacts at ROWS_PER_MOVING_BODY points per
-    moving body, POINTS_PER_MANIFOLD to a manifold (within 15 % of the default scene's and
-    the pile's logs)."""
+    moving body, POINTS_PER_MANIFOLD to a manifold, PUSHED_SHARE of them pushed (an upper
+    bound rather than a guess: a pile pushes most manifolds, a scene at rest few)."""
     from recorder.pack import message_sizes
 
     rows = int(round(ROWS_PER_MOVING_BODY * n_moving))
-    bodies, contacts = message_sizes(steps, n_bodies, rows, int(round(rows / POINTS_PER_MANIFOLD)))
+    k = int(round(rows / POINTS_PER_MANIFOLD))
+    bodies, contacts = message_sizes(steps, n_bodies, rows, k, int(round(PUSHED_SHARE * k)))
     per_step = bodies + contacts + STEP_OVERHEAD_BYTES
     return per_step, per_step * (steps + 1)
 
@@ -314,8 +316,11 @@ def batch_frame_sizes(batch) -> np.ndarray:
     of 8) for an `isaac.engine.records.StepBatch`, as `frame_sizes` gives them one at a time."""
     from recorder.pack import HEAD_BYTES, frame_sizes_of
 
-    slot = batch.row_arrays[CONTACT_FIELDS.index("slot")]
-    return frame_sizes_of(batch.first, batch.angle.shape[1], batch.offsets, slot, HEAD_BYTES)
+    rows = dict(zip(CONTACT_FIELDS, batch.row_arrays))
+    return frame_sizes_of(
+        batch.first, batch.angle.shape[1], batch.offsets, rows["slot"], rows["push_a"],
+        rows["push_b"], HEAD_BYTES,
+    )  # fmt: skip
 
 
 def pack_batch(buf, pos: int, lo: int, hi: int, batch, sizes, model, gravity) -> int:

@@ -188,7 +188,8 @@ _CONTACT_WIRE_V1 = (
     (15, "restitution", "<f8"),
 )
 # format 2: (number, Contacts field, wire type), the manifold fields (taken from each
-# manifold's first row) then the point fields, in recorder.schema's order
+# manifold's first row; the pushes of the manifolds in ``pushed`` only, those whose push is not
+# +0.0 in every component) then the point fields, in recorder.schema's order
 CONTACT_MANIFOLD_WIRE = (
     (16, "substep", "<u4"),
     (17, "a", "<u4"),
@@ -197,6 +198,7 @@ CONTACT_MANIFOLD_WIRE = (
     (20, "points", "<u4"),
     (21, "normal", "<f8"),
     (22, "pair_depth", "<f8"),
+    (25, "pushed", "<u4"),
     (23, "push_a", "<f8"),
     (24, "push_b", "<f8"),
 )
@@ -247,6 +249,16 @@ def manifold_starts(contacts) -> np.ndarray:
     return starts
 
 
+def pushed_manifolds(contacts, starts: np.ndarray) -> np.ndarray:
+    """The manifolds (indices into ``starts``) whose push is stored: any bit of push_a or
+    push_b set (-0.0 included), so that leaving the others out keeps every bit."""
+    bits = [
+        np.ascontiguousarray(getattr(contacts, name), dtype="<f8").view(np.uint64)[starts]
+        for name in ("push_a", "push_b")
+    ]
+    return np.flatnonzero((bits[0] != 0).any(axis=1) | (bits[1] != 0).any(axis=1))
+
+
 def encode_contacts(record: StepRecord) -> bytes:
     """``isaac.log.Contacts`` (format 2): the step's manifolds, the pair fields once per
     manifold and the point fields per point, column by column. ValueError if the rows are
@@ -255,8 +267,16 @@ def encode_contacts(record: StepRecord) -> bytes:
     starts = manifold_starts(c)
     parts = [S.enc_uint(1, record.step), S.enc_double(2, record.time)]
     points = np.diff(np.append(starts, len(c))).astype("<u4")
+    pushed = pushed_manifolds(c, starts)
     for number, name, dtype in CONTACT_MANIFOLD_WIRE:
-        values = points if name == "points" else np.asarray(getattr(c, name))[starts]
+        if name == "points":
+            values = points
+        elif name == "pushed":
+            values = pushed.astype("<u4")
+        elif name in ("push_a", "push_b"):
+            values = np.asarray(getattr(c, name))[starts[pushed]]
+        else:
+            values = np.asarray(getattr(c, name))[starts]
         S.packed(parts, number, values, dtype)
     for number, name, dtype in CONTACT_POINT_WIRE:
         S.packed(parts, number, getattr(c, name), dtype)

@@ -35,11 +35,12 @@ CONTACT_FIELDS = RECORD_CONTACT_FIELDS
 BODY_ROW_BYTES = (16, 8, 16, 8, 1)
 BODY_ROW_BYTES_A = np.array(BODY_ROW_BYTES, dtype=np.int64)  # the same, for the kernel
 # the Contacts message of format 2 (recorder.schema, recorder.mcap_writer.encode_contacts): its
-# fields' numbers in message order, the bytes each takes per manifold (the first
-# CONTACT_MANIFOLD_FIELDS) or per point (the rest)
-CONTACT_NUMBERS = np.array([16, 17, 18, 19, 20, 21, 22, 23, 24, 8, 10, 13, 14, 15], dtype=np.int64)
-CONTACT_UNIT_BYTES = np.array([4, 4, 4, 4, 4, 16, 8, 16, 16, 16, 8, 8, 8, 8], dtype=np.int64)
-CONTACT_MANIFOLD_FIELDS = 9
+# fields' numbers in message order, the bytes each takes per item, and what it has one item
+# per: a manifold (K), a pushed manifold (P) or a point (M)
+K, P, M = 0, 1, 2
+CONTACT_NUMBERS = np.array([16, 17, 18, 19, 20, 21, 22, 25, 23, 24, 8, 10, 13, 14, 15])
+CONTACT_UNIT_BYTES = np.array([4, 4, 4, 4, 4, 16, 8, 4, 16, 16, 16, 8, 8, 8, 8])
+CONTACT_PER = np.array([K, K, K, K, K, K, K, P, P, P, M, M, M, M, M])
 
 
 @numba.njit(cache=True, nogil=True)
@@ -61,11 +62,17 @@ def _message_size(head, rows, row_bytes):
 
 
 @numba.njit(cache=True, nogil=True)
-def _contacts_size(head, m, k):
-    """Bytes of a format 2 Contacts message of k manifolds holding m points."""
+def _count(per, m, k, p):
+    return k if per == K else (p if per == P else m)
+
+
+@numba.njit(cache=True, nogil=True)
+def _contacts_size(head, m, k, p):
+    """Bytes of a format 2 Contacts message of k manifolds (p of them pushed) holding m
+    points."""
     size = head
     for j in range(CONTACT_NUMBERS.shape[0]):
-        count = k if j < CONTACT_MANIFOLD_FIELDS else m
+        count = _count(CONTACT_PER[j], m, k, p)
         if count:
             nbytes = count * CONTACT_UNIT_BYTES[j]
             size += varint_size((CONTACT_NUMBERS[j] << 3) | 2) + varint_size(nbytes) + nbytes
@@ -73,21 +80,37 @@ def _contacts_size(head, m, k):
 
 
 @numba.njit(cache=True, nogil=True)
-def message_sizes(step: int, n: int, m: int, k: int) -> tuple[int, int]:
+def message_sizes(step: int, n: int, m: int, k: int, p: int) -> tuple[int, int]:
     """Exact byte sizes of the Bodies and Contacts messages of a step with n bodies and m
-    contact points in k manifolds (compiled: the simulating process asks once per step)."""
+    contact points in k manifolds, p of them pushed (compiled: the simulating process asks
+    once per step)."""
     head = 1 + varint_size(step) + 1 + 8
-    return (_message_size(head, n, BODY_ROW_BYTES_A), _contacts_size(head, m, k))
+    return (_message_size(head, n, BODY_ROW_BYTES_A), _contacts_size(head, m, k, p))
 
 
 @numba.njit(cache=True, nogil=True)
-def manifold_count(slot) -> int:
-    """The manifolds of a step's contact rows: the rows at slot 0."""
+def _moved(push_a, push_b, r):
+    """Whether row r's push is stored: any component not +0.0 (-0.0 too: every bit is kept)."""
+    moved = False
+    for c in range(2):
+        x = push_a[r, c]
+        y = push_b[r, c]
+        moved |= x != 0.0 or np.signbit(x) or y != 0.0 or np.signbit(y)
+    return moved
+
+
+@numba.njit(cache=True, nogil=True)
+def manifold_counts(slot, push_a, push_b) -> tuple[int, int]:
+    """(manifolds, pushed manifolds) of a step's contact rows: a manifold begins at slot 0;
+    it is pushed when its push is stored (`_moved`)."""
     k = 0
+    p = 0
     for r in range(slot.shape[0]):
         if slot[r] == 0:
             k += 1
-    return k
+            if _moved(push_a, push_b, r):
+                p += 1
+    return k, p
 
 
 @numba.njit(cache=True, nogil=True)
@@ -183,6 +206,7 @@ def pack_layout(
     n,
     m,
     k,
+    p,
     contacts_at,
     position,
     angle,
@@ -205,9 +229,10 @@ def pack_layout(
     gy,
 ):
     """Write the tags and lengths of Bodies at ``buf[base:]`` and of Contacts (format 2) at
-    ``buf[base + contacts_at:]`` for n bodies and m contact points in k manifolds.
+    ``buf[base + contacts_at:]`` for n bodies and m contact points in k manifolds, p of them
+    pushed.
 
-    Returns (bad, offsets, bodies bytes, contacts bytes, stats): offsets (19,) = where each
+    Returns (bad, offsets, bodies bytes, contacts bytes, stats): offsets (20,) = where each
     field's values go, the 5 of BODY_FIELDS then the 14 of the Contacts message in its order
     (`CONTACT_NUMBERS`; -1: left out, empty); bad = -1, or the index in BODY_FIELDS +
     CONTACT_FIELDS of the first float field holding a NaN or an infinity, in which case the
@@ -222,7 +247,7 @@ def pack_layout(
     start = base + contacts_at
     at = _head(buf, start, step, time)
     for j in range(CONTACT_NUMBERS.shape[0]):
-        count = k if j < CONTACT_MANIFOLD_FIELDS else m
+        count = _count(CONTACT_PER[j], m, k, p)
         at = _field(buf, at, CONTACT_NUMBERS[j], count * CONTACT_UNIT_BYTES[j], offsets, 5 + j)
     contacts_len = at - start
     bad = -1
@@ -398,7 +423,7 @@ def pack_frame(
     Returns (k, bodies bytes, contacts bytes): k = -1, or the index of the first float field
     holding a NaN or an infinity (nothing then is fit to send).
     """
-    k = manifold_count(slot)
+    k, p = manifold_counts(slot, push_a, push_b)
     bad, offsets, bodies_len, contacts_len, sums = pack_layout(
         buf,
         pos + HEAD_BYTES,
@@ -407,6 +432,7 @@ def pack_frame(
         n,
         m,
         k,
+        p,
         contacts_at,
         position,
         angle,
@@ -441,6 +467,14 @@ def pack_frame(
         for j in range(k - 1):
             points[j] = starts[j + 1] - starts[j]
         points[k - 1] = m - starts[k - 1]
+        pushed = np.empty(p, dtype=np.int32)
+        moved = np.empty(p, dtype=np.int64)
+        q = 0
+        for j in range(k):
+            if _moved(push_a, push_b, starts[j]):
+                pushed[q] = j
+                moved[q] = starts[j]
+                q += 1
         _put_values(buf, offsets[5], _gather(substep, starts))
         _put_values(buf, offsets[6], _gather(a, starts))
         _put_values(buf, offsets[7], _gather(b, starts))
@@ -448,13 +482,14 @@ def pack_frame(
         _put_values(buf, offsets[9], points)
         _put_values(buf, offsets[10], _gather(normal, starts))
         _put_values(buf, offsets[11], _gather(pair_depth, starts))
-        _put_values(buf, offsets[12], _gather(push_a, starts))
-        _put_values(buf, offsets[13], _gather(push_b, starts))
-    _put_values(buf, offsets[14], point)
-    _put_values(buf, offsets[15], depth)
-    _put_values(buf, offsets[16], impulse)
-    _put_values(buf, offsets[17], tangent_impulse)
-    _put_values(buf, offsets[18], restitution)
+        _put_values(buf, offsets[12], pushed)
+        _put_values(buf, offsets[13], _gather(push_a, moved))
+        _put_values(buf, offsets[14], _gather(push_b, moved))
+    _put_values(buf, offsets[15], point)
+    _put_values(buf, offsets[16], depth)
+    _put_values(buf, offsets[17], impulse)
+    _put_values(buf, offsets[18], tangent_impulse)
+    _put_values(buf, offsets[19], restitution)
     # the padding after each message is zero, as `recorder.frames.pack` writes it (a ring
     # slot holds an older frame's bytes)
     body_end = pos + HEAD_BYTES + bodies_len
@@ -625,17 +660,17 @@ def pack_rerun(
 
 # -- a batch of MCAP frames in one call --------------------------------------------------------
 @numba.njit(cache=True, nogil=True)
-def frame_sizes_of(first, n, offsets, slot, head_bytes):
+def frame_sizes_of(first, n, offsets, slot, push_a, push_b, head_bytes):
     """Each step's (Bodies bytes, Contacts bytes, frame bytes) for a `StepBatch` whose first
-    record is step `first` (offsets: its row offsets; slot: its rows' slots), as
+    record is step `first` (offsets: its row offsets; slot, push_a, push_b: its rows'), as
     `recorder.frames.frame_sizes` gives them one at a time: a (steps, 3) int64 array."""
     steps = offsets.shape[0] - 1
     out = np.empty((steps, 3), dtype=np.int64)
     for s in range(steps):
         r0 = offsets[s]
         r1 = offsets[s + 1]
-        k = manifold_count(slot[r0:r1])
-        bodies, contacts = message_sizes(first + s, n, r1 - r0, k)
+        k, p = manifold_counts(slot[r0:r1], push_a[r0:r1], push_b[r0:r1])
+        bodies, contacts = message_sizes(first + s, n, r1 - r0, k, p)
         out[s, 0] = bodies
         out[s, 1] = contacts
         out[s, 2] = head_bytes + ((bodies + 7) & ~7) + ((contacts + 7) & ~7)

@@ -209,8 +209,8 @@ def contacts_from_message(msg: dict) -> Contacts:
     """`Contacts` (one row per point) from a decoded `/contacts` message of either format
     (`recorder.schema.decode`); ValueError if an array does not fit the counts. Format 2's
     manifold fields are repeated on each of the manifold's rows (``slot`` counts the points of
-    a manifold from 0, a push sits on slot 0, the other rows' are +0.0); format 1 logs hold no
-    pair depth: it reads NaN."""
+    a manifold from 0; a push sits on slot 0 of a manifold in ``pushed``, every other row's is
+    +0.0); format 1 logs hold no pair depth: it reads NaN."""
     if "slot" in msg:
         return _contacts_v1(msg)
     k = msg["a"].size
@@ -224,6 +224,8 @@ def contacts_from_message(msg: dict) -> Contacts:
         raise ValueError(f"/contacts: manifold {int(np.argmin(counts))} has no point")
     m = int(counts.sum())
     what = f"{m} contact points"
+    # checked before anything m long is made: the counts of a hostile log may claim billions
+    _sized(msg, "/contacts", "point_depth", m, what)
     starts = np.zeros(k, dtype=np.int64)
     if k:
         np.cumsum(counts[:-1], out=starts[1:])
@@ -234,9 +236,16 @@ def contacts_from_message(msg: dict) -> Contacts:
         values = manifold(key)[of_row]
         return values.astype(dtype) if dtype is not None else values
 
+    pushed = msg["pushed"].astype(np.int64)
+    p = pushed.size
+    if p and (int(pushed.max()) >= k or (np.diff(pushed) <= 0).any()):
+        raise ValueError(f"/contacts: pushed names manifolds out of order or past the {k}")
+
     def pushes(key):
         out = np.zeros((m, 2))
-        out[starts] = manifold(key, 2).reshape(k, 2)
+        out[starts[pushed]] = _sized(msg, "/contacts", key, 2 * p, f"{p} pushed manifolds").reshape(
+            p, 2
+        )
         return out
 
     return Contacts(

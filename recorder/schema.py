@@ -80,8 +80,9 @@ MESSAGES: dict[str, list[tuple[str, int, str, bool]]] = {
         ("points", 20, "fixed32", True),  # (k,) points of the manifold (1 or 2)
         ("normal", 21, "double", True),  # (k, 2) flattened, unit, from a to b
         ("pair_depth", 22, "double", True),  # (k,) m, the pair's MTD depth
-        ("push_a", 23, "double", True),  # (k, 2) flattened, m, world
-        ("push_b", 24, "double", True),  # (k, 2) flattened, m, world
+        ("pushed", 25, "fixed32", True),  # (p,) ascending: the manifolds the push-out moved
+        ("push_a", 23, "double", True),  # (p, 2) flattened, m, world: of those manifolds
+        ("push_b", 24, "double", True),  # (p, 2) flattened, m, world
         ("point", 8, "double", True),  # (m, 2) flattened, m, world; per point from here on
         ("point_depth", 10, "double", True),  # (m,) m, the point's own penetration
         ("impulse", 13, "double", True),  # (m,) N s, >= 0

@@ -95,7 +95,11 @@ def ring_bytes_for(kind: str, n_bodies: int) -> int:
     ~3 contact rows per body."""
     from recorder.pack import message_sizes
 
-    estimate = FRAME_HEAD.size + sum(message_sizes(0, n_bodies, 3 * n_bodies, 3 * n_bodies)) + 16
+    estimate = (
+        FRAME_HEAD.size
+        + sum(message_sizes(0, n_bodies, 3 * n_bodies, 3 * n_bodies, 3 * n_bodies))
+        + 16
+    )
     size = min(max(RING_FRAMES[kind] * estimate, RING_MIN), RING_MAX)
     return (size + mmap.PAGESIZE - 1) // mmap.PAGESIZE * mmap.PAGESIZE
 

@@ -83,8 +83,12 @@ def _manifolds(local, bodies, contacts):
         pos = np.array(before.position).reshape(-1, 2)
         ang = np.array(before.angle)
         normal = np.array(c.normal).reshape(-1, 2)
-        push_a = np.array(c.push_a).reshape(-1, 2)
-        push_b = np.array(c.push_b).reshape(-1, 2)
+        # the pushes are stored for the manifolds the push-out moved (`pushed`) only
+        push_a = np.zeros((len(c.a), 2))
+        push_b = np.zeros((len(c.a), 2))
+        moved = np.array(c.pushed, dtype=np.int64)
+        push_a[moved] = np.array(c.push_a).reshape(-1, 2)
+        push_b[moved] = np.array(c.push_b).reshape(-1, 2)
         point = np.array(c.point).reshape(-1, 2)
         at = 0
         for j in range(len(c.a)):

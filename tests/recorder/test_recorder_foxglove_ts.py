@@ -104,8 +104,14 @@ def test_every_channel_decodes_with_foxglove_typescript_stack_bit_for_bit(tmp_pa
     assert (np.array(js["points"]) == 2).any()  # a two-point manifold among them
     for name in ("substep", "a", "b", "feature"):
         assert np.array_equal(np.array(js[name], dtype=np.int64), getattr(c, name)[first]), name
-    for name in ("normal", "pair_depth", "push_a", "push_b"):
+    for name in ("normal", "pair_depth"):
         want = getattr(c, name)[first].reshape(-1)
+        assert np.array_equal(np.array(js[name], dtype=np.float64), want), name
+    # the pushes of the manifolds the push-out moved, named by index
+    moved = np.flatnonzero((c.push_a[first] != 0).any(axis=1) | (c.push_b[first] != 0).any(axis=1))
+    assert np.array_equal(np.array(js["pushed"], dtype=np.int64), moved)
+    for name in ("push_a", "push_b"):
+        want = getattr(c, name)[first][moved].reshape(-1)
         assert np.array_equal(np.array(js[name], dtype=np.float64), want), name
     for name, ours in (
         ("point", "point"),

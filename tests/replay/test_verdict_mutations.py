@@ -32,6 +32,7 @@ from replay.report import format_text
 sys.path.insert(0, str(Path(__file__).parent))
 from mcap_surgery import (  # noqa: E402
     STEPS,
+    TINY,
     abandoned_log,
     crafted,
     layout,
@@ -338,19 +339,37 @@ def test_inspect_and_recover_report_the_same_damage(clean, tmp_path, capsys):
 
 
 # every field of the /contacts message (format 2): the manifold fields, once per manifold, and
-# the point fields; the untouched values of step 50: two manifolds of two points each
+# the point fields; at step 50 of TINY under a full push-out: two manifolds of two points, the
+# second pushed
 _CONTACT_FIELDS = [
     (name, typ) for name, _n, typ, repeated in S.MESSAGES["Contacts"] if repeated
 ] + [("step", "uint64"), ("time", "double")]
 
 
+@pytest.fixture(scope="module")
+def pushed(tmp_path_factory) -> Path:
+    from isaac.engine.simulation import Simulation
+    from isaac.scene import load_scene_text
+    from recorder import Recorder
+
+    text = TINY.replace("  steps: 50\n", "  steps: 50\n  position_correction: full\n")
+    sim = Simulation(load_scene_text(text, source="<tiny, full push-out>"))
+    path = tmp_path_factory.mktemp("pushed") / "pushed.mcap"
+    with Recorder(sim, mcap_path=str(path), flush_every=10, offload="none") as rec:
+        rec.write(sim.record())
+        for r in sim.run(STEPS):
+            rec.write(r)
+    return path
+
+
 @pytest.mark.parametrize("field,typ", _CONTACT_FIELDS, ids=[f for f, _ in _CONTACT_FIELDS])
-def test_an_edit_to_any_manifold_or_point_field_is_caught(clean, tmp_path, field, typ):
+def test_an_edit_to_any_manifold_or_point_field_is_caught(pushed, tmp_path, field, typ):
     k = STEPS
     seen = {}
 
     def change(d):
         assert list(d["points"]) == [2, 2]  # manifolds of two points: a second point is edited
+        assert list(d["pushed"]) == [1]
         seen["before"] = d[field]
         if typ == "double" and field != "time":
             values = np.array(d[field])
@@ -362,17 +381,20 @@ def test_an_edit_to_any_manifold_or_point_field_is_caught(clean, tmp_path, field
             d[field] = d[field] + 1
         elif field == "points":
             d[field] = np.array([1, 3], dtype=np.uint32)  # the same points, regrouped
+        elif field == "pushed":
+            d[field] = np.array([0], dtype=np.uint32)  # the push moved to the other manifold
         else:
             values = np.array(d[field])
             values[-1] += 1
             d[field] = values
 
-    bad = rewrite(clean, tmp_path / "bad.mcap", crafted("/contacts", k, change))
+    assert verdict(pushed)[0] == 0
+    bad = rewrite(pushed, tmp_path / "bad.mcap", crafted("/contacts", k, change))
     assert "before" in seen
     status, text = verdict(bad)
     assert status in (1, 2), text
     assert f"step {k}" in text, text
-    if status == 1 and field not in ("step", "points", "a", "b"):
+    if status == 1 and field not in ("step", "points", "pushed", "a", "b"):
         report = replay_log(str(bad))
         d = report.divergences[0]
         assert (d.step, d.channel) == (k, "/contacts")

@@ -41,7 +41,7 @@ const pick = (m) => ({ step: Number(m.step), position: m.position, velocity: m.v
 // protobufjs names a field by its name or its JSON name, depending on how the root was built
 const field = (m, snake) => m[snake] ?? m[snake.replace(/_(.)/g, (_, c) => c.toUpperCase())];
 const CONTACT_FIELDS = ["substep", "a", "b", "feature", "points", "normal", "pair_depth",
-                        "push_a", "push_b", "point", "point_depth", "impulse", "tangent_impulse",
+                        "pushed", "push_a", "push_b", "point", "point_depth", "impulse", "tangent_impulse",
                         "restitution"];
 const pickContacts = (m) => Object.fromEntries(
   [["step", Number(m.step)], ...CONTACT_FIELDS.map((f) => [f, field(m, f)])]);
