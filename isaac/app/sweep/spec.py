@@ -419,7 +419,13 @@ def refusal(sweep: Sweep, index: int) -> SweepError:
         )
     except SceneError as exc:
         return _run_refusal(sweep, index, exc)
-    raise AssertionError(f"run {index}'s scene loads: not a refusal")
+    return SweepError(
+        f"run {index}: a worker's scene loader refuses this run's scene, which this process's "
+        "accepts: do the workers run the same version of ISAAC?",
+        source=sweep.path,
+        line=sweep.runs_line,
+        path="runs",
+    )
 
 
 def check_runs(sweep: Sweep, indices=None) -> dict:
