@@ -29,9 +29,9 @@ def register(subparsers) -> None:
     run.add_argument(
         "--compression",
         choices=("zstd", "lz4", "none"),
-        default="none",
-        help="MCAP chunk compression (default: none; docs/log-format.md has the measured cost "
-        "and size of each)",
+        default="lz4",
+        help="MCAP chunk compression (default: lz4, about a third smaller for a few percent of "
+        "the run's time; docs/log-format.md has the measured cost and size of each)",
     )
     run.add_argument(
         "--offload",

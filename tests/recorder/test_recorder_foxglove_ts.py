@@ -1,6 +1,8 @@
-"""The MCAP log decodes in Foxglove's TypeScript stack (@mcap/core + protobufjs), bit for bit.
+"""The MCAP log decodes in Foxglove's TypeScript stack (@mcap/core + protobufjs, and
+@mcap/support's lz4 and zstd decompressors, the ones Foxglove loads MCAP files with), bit for
+bit, with each chunk compression.
 
-Needs node and npm (on this project's machines); the two npm packages are installed once into
+Needs node and npm (on this project's machines); the three npm packages are installed once into
 .venv/js-mcap-check. Without node, or with no npm registry to install from, the test is skipped
 with the reason.
 """
@@ -35,7 +37,7 @@ def _node_modules() -> Path:
     node, npm = shutil.which("node"), shutil.which("npm")
     if node is None or npm is None:
         pytest.skip("node/npm not installed")
-    if not (MODULES / "node_modules" / "@mcap" / "core").exists():
+    if not all((MODULES / "node_modules" / "@mcap" / p).exists() for p in ("core", "support")):
         MODULES.mkdir(parents=True, exist_ok=True)
         shutil.copy(JS / "package.json", MODULES / "package.json")
         try:
@@ -54,13 +56,25 @@ def _node_modules() -> Path:
     return MODULES
 
 
-def test_every_channel_decodes_with_foxglove_typescript_stack_bit_for_bit(tmp_path):
+@pytest.mark.parametrize("compression", ["lz4", "zstd", "none"])  # lz4: the default
+def test_every_channel_decodes_with_foxglove_typescript_stack_bit_for_bit(tmp_path, compression):
     modules = _node_modules()
     scene = tmp_path / "scene.yaml"
     scene.write_text(SCENE)
     log = tmp_path / "run.mcap"
     run = subprocess.run(
-        [sys.executable, "-m", "isaac", "run", str(scene), "--quiet", "--mcap", str(log)],
+        [
+            sys.executable,
+            "-m",
+            "isaac",
+            "run",
+            str(scene),
+            "--quiet",
+            "--mcap",
+            str(log),
+            "--compression",
+            compression,
+        ],
         cwd=REPO,
         capture_output=True,
         text=True,

@@ -327,7 +327,9 @@ def test_writer_processes_write_the_same_bytes_as_writing_in_process(tmp_path, r
     paths = {}
     for offload in ("none", "process"):
         path = tmp_path / f"{offload}.mcap"
-        rec = Recorder(sim, mcap_path=str(path), scene_text=SCENE_TEXT, offload=offload)
+        rec = Recorder(
+            sim, mcap_path=str(path), scene_text=SCENE_TEXT, compression="none", offload=offload
+        )  # uncompressed: `_mcap_config` says so for the writer it swaps in
         if offload == "process" and ring_bytes is not None:
             # a ring a few frames long: every wrap and every wait for the child is exercised
             rec.mcap.close()

@@ -5,7 +5,9 @@ so the log holds 7 chunks); `layout` lists where each record starts and ends (fr
 own bytes, walked with the MCAP record framing), so a mutation can aim at a chunk's data, its
 header, the summary or the footer; `rewrite` copies a log through the mcap Writer with its
 messages edited (so every CRC and the summary are consistent with the edit, and only what the
-log claims in ``isaac.end`` is left as it was).
+log claims in ``isaac.end`` is left as it was). The logs made here are uncompressed on purpose
+(``compression="none"``; the recorder's default is lz4): a byte flipped or zeroed then lands in
+a message's bytes, not in a compressed stream.
 """
 
 from __future__ import annotations
@@ -63,7 +65,9 @@ def abandoned_log(path: Path, *, steps: int) -> Path:
     steps < 0: killed before its first chunk (the recorder writes step 0 as it starts, so the
     file is cut back to what came before that chunk: header, schemas, metadata)."""
     sim = Simulation(load_scene_text(TINY, source="<tiny>"))
-    rec = Recorder(sim, mcap_path=str(path), flush_every=FLUSH_EVERY, offload="none")
+    rec = Recorder(
+        sim, mcap_path=str(path), flush_every=FLUSH_EVERY, compression="none", offload="none"
+    )
     if steps >= 0:
         rec.write(sim.record())
         for r in sim.run(steps):

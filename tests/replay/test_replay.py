@@ -377,7 +377,7 @@ def test_the_partial_log_of_an_abandoned_run_is_incomplete_unless_partial(tmp_pa
     scene, _ = scene_from(STACK)
     sim = Simulation(scene)
     path = tmp_path / "killed.mcap"
-    rec = Recorder(sim, mcap_path=str(path), flush_every=50)
+    rec = Recorder(sim, mcap_path=str(path), flush_every=50, compression="none")
     rec.write(sim.record())
     for r in sim.run(170):
         rec.write(r)

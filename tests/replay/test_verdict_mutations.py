@@ -355,7 +355,9 @@ def pushed(tmp_path_factory) -> Path:
     text = TINY.replace("  steps: 50\n", "  steps: 50\n  position_correction: full\n")
     sim = Simulation(load_scene_text(text, source="<tiny, full push-out>"))
     path = tmp_path_factory.mktemp("pushed") / "pushed.mcap"
-    with Recorder(sim, mcap_path=str(path), flush_every=10, offload="none") as rec:
+    with Recorder(
+        sim, mcap_path=str(path), flush_every=10, compression="none", offload="none"
+    ) as rec:
         rec.write(sim.record())
         for r in sim.run(STEPS):
             rec.write(r)

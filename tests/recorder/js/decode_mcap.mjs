@@ -4,6 +4,7 @@
 // message and every field of the last /contacts message holding contacts (per manifold and per
 // point, format 2), for tests/recorder/test_recorder_foxglove_ts.py to compare bit for bit.
 import { McapIndexedReader } from "@mcap/core";
+import { loadDecompressHandlers } from "@mcap/support";
 import protobuf from "protobufjs";
 import descriptor from "protobufjs/ext/descriptor/index.js";
 import { open } from "node:fs/promises";
@@ -18,7 +19,9 @@ const readable = {
     return buf;
   },
 };
-const reader = await McapIndexedReader.Initialize({ readable });
+// lz4 and zstd chunks: the handlers Foxglove's own MCAP loading uses (@mcap/support, wasm)
+const decompressHandlers = await loadDecompressHandlers();
+const reader = await McapIndexedReader.Initialize({ readable, decompressHandlers });
 const types = new Map();
 for (const [id, schema] of reader.schemasById) {
   const root = protobuf.Root.fromDescriptor(descriptor.FileDescriptorSet.decode(schema.data));
