@@ -166,9 +166,10 @@ def pack_into(
     model: ``mass``, ``inertia`` (float64) and ``concrete`` (bool) arrays, for the /stats sums;
     gravity: (gx, gy) m/s^2. stats: the /stats values to write instead of the computed ones.
     sizes: the messages' sizes when the caller has them (`frame_sizes`). Returns False, the frame
-    unusable, when a float of the record is NaN or infinite.
+    unusable, when a float of the record is NaN or infinite; ValueError when its contact rows
+    are not manifolds (`recorder.mcap_writer.manifold_starts`).
     """
-    from recorder.pack import pack_frame
+    from recorder.pack import NOT_MANIFOLDS, pack_frame
 
     bodies_size, contacts_size = sizes if sizes is not None else frame_sizes(record)[:2]
     c = record.contacts
@@ -206,6 +207,10 @@ def pack_into(
         *gravity,
     )
     if bad >= 0:
+        if bad == NOT_MANIFOLDS:
+            from recorder.mcap_writer import manifold_starts
+
+            manifold_starts(c)  # raises ValueError naming the row
         return False
     assert (bodies_len, contacts_len) == (bodies_size, contacts_size)
     if stats is not None:

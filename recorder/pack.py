@@ -357,6 +357,39 @@ def _put_values(buf, at, src):
 HEAD_BYTES = 120  # frames.FRAME_HEAD: step, time, n, m, 9 stats, 2 message lengths
 
 
+NOT_MANIFOLDS = 99  # pack_frame's answer for rows that are not manifolds (`_manifolds_ok`)
+
+
+@numba.njit(cache=True, nogil=True)
+def _same(x, y):
+    """Whether two float64 are the same bits (-0.0 is not 0.0, a NaN is itself)."""
+    return (x == y and np.signbit(x) == np.signbit(y)) or (x != x and y != y)
+
+
+@numba.njit(cache=True, nogil=True)
+def _manifolds_ok(substep, a, b, feature, slot, normal, pair_depth, push_a, push_b):
+    """Whether the rows are manifolds as `recorder.mcap_writer.manifold_starts` requires (each
+    begins at slot 0; a later row counts up and repeats its first row's sub-step, bodies,
+    feature, normal and pair depth bit for bit, with a +0.0 push), so that format 2, which
+    stores those once, keeps every bit."""
+    m = slot.shape[0]
+    if m and slot[0] != 0:
+        return False
+    for r in range(1, m):
+        if slot[r] == 0:
+            continue
+        q = r - 1
+        if slot[r] != slot[q] + 1 or substep[r] != substep[q] or a[r] != a[q] or b[r] != b[q]:
+            return False
+        if feature[r] != feature[q] or not _same(pair_depth[r], pair_depth[q]):
+            return False
+        if not (_same(normal[r, 0], normal[q, 0]) and _same(normal[r, 1], normal[q, 1])):
+            return False
+        if _moved(push_a, push_b, r):
+            return False
+    return True
+
+
 @numba.njit(cache=True, nogil=True)
 def _starts(slot, k):
     """The rows beginning a manifold (slot 0), k of them."""
@@ -421,7 +454,7 @@ def pack_frame(
     must be int32, ``exists`` bool.
 
     Returns (k, bodies bytes, contacts bytes): k = -1, or the index of the first float field
-    holding a NaN or an infinity (nothing then is fit to send).
+    holding a NaN or an infinity, or NOT_MANIFOLDS (nothing then is fit to send).
     """
     k, p = manifold_counts(slot, push_a, push_b)
     bad, offsets, bodies_len, contacts_len, sums = pack_layout(
@@ -456,6 +489,8 @@ def pack_frame(
     )
     if bad >= 0:
         return bad, bodies_len, contacts_len
+    if not _manifolds_ok(substep, a, b, feature, slot, normal, pair_depth, push_a, push_b):
+        return NOT_MANIFOLDS, bodies_len, contacts_len
     _put_values(buf, offsets[0], position)
     _put_values(buf, offsets[1], angle)
     _put_values(buf, offsets[2], velocity)
@@ -686,8 +721,8 @@ def pack_frames(
     """Steps lo .. hi - 1 of a batch (the arrays of `isaac.engine.driver.Batch`; step s is
     state index first + s at time (first + s) * dt s, as `StepBatch.record` computes it) as
     consecutive `pack_frame` frames from byte `pos` of `buf`, frame sizes from
-    `frame_sizes_of`. Returns the first step holding a NaN or an infinity (its frame and the
-    ones after it unwritten), or hi."""
+    `frame_sizes_of`. Returns the first step holding a NaN or an infinity or rows that are not
+    manifolds (its frame and the ones after it unwritten), or hi."""
     n = angle.shape[1]
     at = pos
     for s in range(lo, hi):

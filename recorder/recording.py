@@ -320,9 +320,13 @@ class Recorder:
             self.steps_written += good
             self.last_step = batch.first + good - 1
         if good < batch.steps:
-            # the step a writer found a NaN or infinity in: named by the same check as write()
+            # the step a writer found a NaN or infinity in (or rows that are not manifolds):
+            # named by the same checks as write()
+            from recorder.mcap_writer import manifold_starts
+
             record = batch.record(good)
             check_finite(self.model.names, record)
+            manifold_starts(record.contacts)
             raise SimulationError(
                 f"step {record.step}: a recorded value is not finite", step=record.step
             )

@@ -548,3 +548,30 @@ def test_rerun_batches_grow_for_bodies_entering_and_more_contact_rows(tmp_path):
             np.array(points[r.step], dtype=np.float32).reshape(-1, 2),
             r.contacts.point.astype(np.float32).reshape(-1, 2),
         )
+
+
+@pytest.mark.parametrize("field", ["slot", "a", "normal", "pair_depth", "push_b"])
+def test_rows_that_are_not_manifolds_are_refused_not_stored_with_a_loss(field):
+    """Format 2 stores a manifold's fields once: rows whose second point disagrees with its
+    first (or sits at a slot out of turn, or carries a push) would lose a bit, so both encoders
+    refuse them, naming the row."""
+    from recorder.mcap_writer import encode_contacts
+
+    sim, records = _records(steps=20)
+    r = next(r for r in records if (r.contacts.slot == 1).any())
+    c = r.contacts
+    row = int(np.flatnonzero(c.slot == 1)[0])
+    arr = np.array(getattr(c, field))
+    if field == "slot":
+        arr[row] = 2
+    elif field == "a":
+        arr[row] = arr[row] - 1 if arr[row] > 0 else arr[row] + 1
+    else:
+        arr.reshape(len(c), -1)[row, 0] = np.nextafter(arr.reshape(len(c), -1)[row, 0], 1.0)
+    bad = dataclasses.replace(r, contacts=dataclasses.replace(c, **{field: arr}))
+    with pytest.raises(ValueError, match=f"row {row} "):
+        encode_contacts(bad)
+    ring = np.zeros(1 << 20, dtype=np.uint8)
+    with pytest.raises(ValueError, match=f"row {row} "):
+        _packer(ring, sim)._compiled_pack(0, bad, None)
+    assert _packer(ring, sim)._compiled_pack(0, r, None)  # the rows as they were: packed
