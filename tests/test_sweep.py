@@ -30,6 +30,11 @@ from isaac.app.sweep.table import TIMING_COLUMNS
 
 ROOT = Path(__file__).resolve().parents[1]
 SCENES = ROOT / "scenes"
+# Dask's worker processes start with this process's sys.path; under `pytest` (not `python -m
+# pytest`) it holds tests/ but not the repository, and tests/recorder/ (no __init__.py) then
+# shadows the recorder package in the workers of an editable install
+if str(ROOT) not in sys.path:
+    sys.path.append(str(ROOT))
 
 BOUNCE_SWEEP = """\
 scene: {scene}
