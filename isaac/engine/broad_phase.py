@@ -28,15 +28,17 @@ RUN = 16  # _stable_order insertion-sorts runs of this many elements before merg
 
 @numba.njit(cache=True, nogil=True)
 def find_pairs(
-    position, radius, aabb, expand, movable, exists, filtered, category, mask, group, pair_a,
-    pair_b, pair_spare, sweep_index, sweep_key, sweep_table,
+    position, radius, aabb, expand, movable, exists, filtered, category, mask, group, no_collide,
+    pair_a, pair_b, pair_spare, sweep_index, sweep_key, sweep_table,
 ):  # fmt: skip
     """Write candidate pairs (a < b, sorted by (a, b)) into pair_a / pair_b.
 
     position: (n, 2) m; radius: (n,) bounding radius (m); aabb: (n, 4) world boxes (m);
     expand: (n,) extra margin (m) for speculative contacts (0 without ccd); movable: (n,) bool.
     filtered: whether to apply the collision filter (category, mask, group: (n,) int64,
-    isaac.collision_filter) to the pairs that pass the tests; False skips it.
+    isaac.collision_filter) and drop the pairs listed in no_collide (sorted int64 keys
+    a * n + b, a < b: bodies a joint connects) among those that pass the tests; False skips
+    both.
     Scratch, contents on entry unused: pair_spare (like pair_a), sweep_index
     (SWEEP_INDEX_ROWS, n + 1) int64, sweep_key (n,) and sweep_table (n, 8) float64 (a step
     allocates nothing here: for a few bodies the allocations were most of the broad phase's
@@ -108,6 +110,10 @@ def find_pairs(
             j = body[q]
             if filtered and not skip:
                 skip = not collides(category[i], mask[i], group[i], category[j], mask[j], group[j])
+                if not skip and no_collide.shape[0]:
+                    key = min(i, j) * n + max(i, j)
+                    at = np.searchsorted(no_collide, key)
+                    skip = at < no_collide.shape[0] and no_collide[at] == key
             if count < capacity:
                 pair_a[count] = min(i, j)
                 pair_b[count] = max(i, j)

@@ -22,6 +22,8 @@ import pickle
 import subprocess
 import sys
 
+import numpy as np
+
 HELPER_TIMEOUT_S = 300.0  # a helper that takes longer is killed; this process compiles instead
 
 _BOX = ((-0.5, -0.5), (0.5, -0.5), (0.5, 0.5), (-0.5, 0.5))
@@ -49,6 +51,7 @@ class _SmallWorld:
     stages take them."""
 
     def __init__(self, world) -> None:
+        from isaac.engine.joints import JOINT_IMPULSES
         from isaac.engine.records import Contacts
         from isaac.engine.step import ContactCache, StepSettings, Workspace
         from isaac.engine.world import build_model, initial_state
@@ -67,7 +70,9 @@ class _SmallWorld:
         self.settings = StepSettings.of(world)
         self.state = initial_state(scene, self.model)
         self.work = Workspace(self.model)
-        self.cache = ContactCache.of(Contacts.empty(), self.model.n_bodies)
+        self.cache = ContactCache.of(
+            Contacts.empty(), self.model.n_bodies, np.zeros((0, JOINT_IMPULSES))
+        )
 
 
 def prepare(settings, world) -> None:

@@ -45,8 +45,17 @@ from isaac.engine.integrate import (
     advance_positions,
     first_diverged,
 )
+from isaac.engine.joints import (
+    JOINT_IMPULSES,
+    Joints,
+    correct_joint_positions,
+    keep_joint_impulses,
+    prepare_joints,
+    write_joint_rows,
+)
 from isaac.engine.narrow_phase import collide_pairs, match_previous
 from isaac.engine.push_out import push_out
+from isaac.engine.records import CONTACT_FIELDS
 from isaac.engine.solver.seed import solve_seed
 from isaac.engine.solver.sequential import solve_sequential
 
@@ -69,6 +78,8 @@ class Bodies(NamedTuple):
     category: np.ndarray  # (n,) int64, the collision filter (isaac.collision_filter)
     mask: np.ndarray  # (n,) int64
     group: np.ndarray  # (n,) int64
+    no_collide: np.ndarray  # (p,) int64 sorted keys a * n + b of pairs joints keep apart
+    joints: tuple  # `isaac.engine.joints.Joints`'s fields (m rows; none: m = 0)
 
 
 class Pose(NamedTuple):
@@ -110,6 +121,8 @@ class Scratch(NamedTuple):
     impulse: np.ndarray  # N s
     tangent: np.ndarray
     restitution: np.ndarray
+    joint_scratch: np.ndarray  # (m, isaac.engine.joints.WIDTH)
+    joint_error: np.ndarray  # (m, 2) m, rad: what the position pass left
 
 
 class Carry(NamedTuple):
@@ -121,6 +134,7 @@ class Carry(NamedTuple):
     slot: np.ndarray  # int32
     impulse: np.ndarray  # N s
     tangent: np.ndarray
+    joint: np.ndarray  # (m, JOINT_IMPULSES) the joints' accumulated impulses (always all valid)
 
 
 class Settings(NamedTuple):
@@ -176,7 +190,19 @@ class Batch(NamedTuple):
     impulse: np.ndarray
     tangent: np.ndarray
     restitution: np.ndarray
+    # the joints at the end of step s at [s] (`isaac.engine.records.JointRows`' fields)
+    joint_anchor_a: np.ndarray  # (k, m, 2)
+    joint_anchor_b: np.ndarray
+    joint_linear: np.ndarray  # (k, m, 2)
+    joint_angular: np.ndarray  # (k, m)
+    joint_motor: np.ndarray
+    joint_limit: np.ndarray
+    joint_error: np.ndarray  # (k, m, 2)
+    joint_impulses: np.ndarray  # (k, m, JOINT_IMPULSES)
 
+
+# the Batch fields that hold contact rows (grown when a step makes more rows)
+ROW_FIELDS = slice(6, 6 + len(CONTACT_FIELDS))
 
 # what a call ended with (the first value it returns)
 DONE = 0  # every step asked for was taken
@@ -226,6 +252,7 @@ def before_impulses(bodies, cfg, pose, work, carry, carried):
         bodies.category,
         bodies.mask,
         bodies.group,
+        bodies.no_collide,
         work.pair_a,
         work.pair_b,
         work.pair_spare,
@@ -297,12 +324,26 @@ def before_impulses(bodies, cfg, pose, work, carry, carried):
     # 5. impulses come next; semi-implicit Euler puts gravity in first, so contacts see it
     if not cfg.explicit:
         add_gravity(pose.velocity, bodies.movable, pose.exists, cfg.gx, cfg.gy, cfg.h)
+    if work.joint_scratch.shape[0]:
+        prepare_joints(
+            Joints(*bodies.joints),
+            work.joint_scratch,
+            pose.position,
+            pose.angle,
+            pose.exists,
+            bodies.inv_mass,
+            bodies.inv_inertia,
+            cfg.h,
+            carry.joint,
+            cfg.warm_starting,
+        )
     return rows, pairs
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
-def after_impulses(bodies, cfg, pose):
-    """Stage 6 of a sub-step: integration (the seed's explicit Euler puts gravity last)."""
+def after_impulses(bodies, cfg, pose, work):
+    """Stage 6 of a sub-step: integration (the seed's explicit Euler puts gravity last), then
+    the joints' position pass."""
     advance_positions(
         pose.position,
         pose.angle,
@@ -314,6 +355,17 @@ def after_impulses(bodies, cfg, pose):
     )
     if cfg.explicit:
         add_gravity(pose.velocity, bodies.movable, pose.exists, cfg.gx, cfg.gy, cfg.h)
+    if work.joint_scratch.shape[0]:
+        correct_joint_positions(
+            Joints(*bodies.joints),
+            pose.position,
+            pose.angle,
+            pose.exists,
+            bodies.inv_mass,
+            bodies.inv_inertia,
+            cfg.position_iterations,
+            work.joint_error,
+        )
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
@@ -352,6 +404,8 @@ def _impulses_sequential(bodies, cfg, pose, work, carry, carried, rows, table):
         work.push_a,
         work.push_b,
         table,
+        bodies.joints,
+        work.joint_scratch,
     )
 
 
@@ -398,6 +452,8 @@ def carry_over(work, rows, n, carry):
         carry.slot[k] = work.slot[k]
         carry.impulse[k] = work.impulse[k]
         carry.tangent[k] = work.tangent[k]
+    if work.joint_scratch.shape[0]:
+        keep_joint_impulses(work.joint_scratch, carry.joint)
     return rows
 
 
@@ -467,6 +523,26 @@ def _keep_state(batch, s, pose, at):
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
+def _keep_joints(batch, s, bodies, pose, work):
+    write_joint_rows(
+        Joints(*bodies.joints),
+        work.joint_scratch,
+        pose.position,
+        pose.angle,
+        pose.exists,
+        work.joint_error,
+        batch.joint_anchor_a[s],
+        batch.joint_anchor_b[s],
+        batch.joint_linear[s],
+        batch.joint_angular[s],
+        batch.joint_motor[s],
+        batch.joint_limit[s],
+        batch.joint_impulses[s],
+        batch.joint_error[s],
+    )
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
 def _copy_pose(pose, into):
     for i in range(pose.position.shape[0]):
         into.position[i, 0] = pose.position[i, 0]
@@ -486,6 +562,9 @@ def _copy_carry(carry, into, count):
         into.slot[k] = carry.slot[k]
         into.impulse[k] = carry.impulse[k]
         into.tangent[k] = carry.tangent[k]
+    for k in range(carry.joint.shape[0]):
+        for c in range(carry.joint.shape[1]):
+            into.joint[k, c] = carry.joint[k, c]
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
@@ -514,7 +593,7 @@ def _run_steps(
                 _impulses_seed(bodies, cfg, pose, work, rows)
             else:
                 table = _impulses_sequential(bodies, cfg, pose, work, carry, carried, rows, table)
-            after_impulses(bodies, cfg, pose)
+            after_impulses(bodies, cfg, pose, work)
             carried = carry_over(work, rows, n, carry)
             if record:
                 end = keep_rows(batch, at, work, rows, index)
@@ -535,6 +614,8 @@ def _run_steps(
             return status, s, step_carried, body, field, need, table, step_carried
         if record:
             _keep_state(batch, start + s, pose, at)
+            if work.joint_scratch.shape[0]:
+                _keep_joints(batch, start + s, bodies, pose, work)
         last_carried = step_carried
     return DONE, k, carried, -1, -1, 0, table, last_carried
 
@@ -601,6 +682,8 @@ class Stepper:
                 model.category,
                 model.mask,
                 model.group,
+                model.no_collide,
+                tuple(model.joints),
             )
         )
         s = settings
@@ -637,17 +720,20 @@ class Stepper:
                 w.vertices, w.normals, w.aabb, w.expand, w.pair_a, w.pair_b, w.pair_spare,
                 w.sweep_index, w.sweep_key, w.sweep_table, w.push_start, w.a, w.b,
                 w.feature, w.slot, w.point, w.normal, w.depth, w.pair_depth, w.previous,
-                w.push_a, w.push_b, w.impulse, w.tangent, w.restitution,
+                w.push_a, w.push_b, w.impulse, w.tangent, w.restitution, w.joint_scratch,
+                w.joint_error,
             )
         )  # fmt: skip
         old = getattr(self, "carry", None)
         self._last_start = None  # the saved carry is rebuilt
-        self.carry = _carry_arrays(rows)
-        self.saved_carry = _carry_arrays(rows)
+        joints = w.joint_scratch.shape[0]
+        self.carry = _carry_arrays(rows, joints)
+        self.saved_carry = _carry_arrays(rows, joints)
         if old is not None:  # the valid rows go on (the workspace only grows past them)
             m = min(self.carried, rows)
-            for new, kept in zip(self.carry, old):
+            for new, kept in zip(self.carry[:-1], old[:-1]):
                 new[:m] = kept[:m]
+            self.carry[-1][:] = old[-1]
         self._sized_for = rows
 
     def set_carry(self, cache) -> None:
@@ -660,15 +746,17 @@ class Stepper:
             self.carry, (cache.key, cache.feature, cache.slot, cache.impulse, cache.tangent)
         ):
             into[:m] = values
+        self.carry[-1][:] = cache.joints
         self.carried = m
 
     def cache_arrays(self) -> tuple:
-        """Copies of the valid Carry rows: (key, feature, slot, impulse, tangent)."""
+        """Copies of the valid Carry rows: (key, feature, slot, impulse, tangent, joints)."""
         m = self.carried
-        return tuple(a[:m].copy() for a in self.carry)
+        return (*(a[:m].copy() for a in self.carry[:-1]), self.carry[-1].copy())
 
     def new_batch(self, k: int, rows: int | None = None) -> tuple:
         n = self.n
+        m = self.work.joint_scratch.shape[0]
         rows = max(16, self._rows_per_step * k if rows is None else rows)
         return tuple(
             Batch(
@@ -679,6 +767,9 @@ class Stepper:
                 np.empty(rows, dtype=np.int32), np.empty((rows, 2)), np.empty((rows, 2)),
                 np.empty(rows), np.empty(rows), np.empty((rows, 2)), np.empty((rows, 2)),
                 np.empty(rows), np.empty(rows), np.empty(rows),
+                np.empty((k, m, 2)), np.empty((k, m, 2)), np.empty((k, m, 2)), np.empty((k, m)),
+                np.empty((k, m)), np.empty((k, m)), np.empty((k, m, 2)),
+                np.empty((k, m, JOINT_IMPULSES)),
             )
         )  # fmt: skip
 
@@ -761,13 +852,14 @@ class Stepper:
         )  # fmt: skip
 
 
-def _carry_arrays(rows: int) -> tuple:
+def _carry_arrays(rows: int, joints: int) -> tuple:
     return (
         np.zeros(rows, dtype=np.int64),
         np.zeros(rows, dtype=np.int32),
         np.zeros(rows, dtype=np.int32),
         np.zeros(rows),
         np.zeros(rows),
+        np.zeros((joints, JOINT_IMPULSES)),
     )
 
 
@@ -776,7 +868,7 @@ def _grown_rows(batch: tuple, needed: int) -> tuple:
     b = Batch(*batch)
     size = max(needed, 2 * b.a.shape[0])
     fields = list(batch)
-    for i in range(6, len(fields)):
+    for i in range(ROW_FIELDS.start, ROW_FIELDS.stop):
         old = fields[i]
         new = np.empty((size, *old.shape[1:]), dtype=old.dtype)
         new[: old.shape[0]] = old

@@ -99,6 +99,57 @@ class Contacts:
         return Contacts(i, i, i, i, i, v, v, f, f, v, v, f, f, f)
 
 
+JOINT_FIELDS = (
+    "anchor_a",
+    "anchor_b",
+    "linear_impulse",
+    "angular_impulse",
+    "motor_impulse",
+    "limit_impulse",
+    "error",
+    "impulses",
+)
+
+
+@dataclass(frozen=True, eq=False)
+class JointRows:
+    """Every joint of one step (row k: the scene's joint k), at the step's end.
+
+    anchor_a, anchor_b: (m, 2) each body's anchor (m, world).
+    linear_impulse: (m, 2) the constraint's impulse on b (N s, world; a takes minus it):
+        revolute and weld, the anchors' point impulse; distance, along the axis a -> b;
+        prismatic, along the axis's normal.
+    angular_impulse: (m,) the constraint's angular impulse on b (N m s, counter-clockwise; a
+        takes minus it): weld and prismatic (their locked rotation), 0 otherwise.
+    motor_impulse: (m,) the motor's impulse on b (N m s revolute, N s prismatic), 0 without.
+    limit_impulse: (m,) the limits' impulse on b: lower limit's less upper limit's (N m s, N s).
+    error: (m, 2) what is left of the constraint after the step's position correction: the
+        anchors' distance off it (m) and the rotation off it (rad; weld and prismatic).
+    impulses: (m, JOINT_IMPULSES) the solver's accumulated impulses of the step's last
+        sub-step (isaac.engine.joints, columns J0 .. JU), which the next step warm-starts from;
+        the fields above are made from them.
+    A joint whose bodies do not both exist has all zeros. Impulses are the last sub-step's.
+    """
+
+    anchor_a: np.ndarray
+    anchor_b: np.ndarray
+    linear_impulse: np.ndarray
+    angular_impulse: np.ndarray
+    motor_impulse: np.ndarray
+    limit_impulse: np.ndarray
+    error: np.ndarray
+    impulses: np.ndarray
+
+    def __len__(self) -> int:
+        return int(self.anchor_a.shape[0])
+
+    @staticmethod
+    def empty(m: int = 0) -> JointRows:
+        v = np.zeros((m, 2))
+        f = np.zeros(m)
+        return JointRows(v, v.copy(), v.copy(), f, f.copy(), f.copy(), v.copy(), np.zeros((m, 6)))
+
+
 @dataclass(frozen=True, eq=False)
 class StepRecord:
     """The state after step ``step`` and the contacts found while taking it.
@@ -112,6 +163,8 @@ class StepRecord:
     angular_velocity: (n,) angular velocity (rad/s, counter-clockwise positive).
     exists: (n,) bool, whether each body is in the scene at ``time`` (the seed's Exist).
     contacts: the contacts resolved while advancing from step-1 to step.
+    joints: the joints at the end of that step (`JointRows`), or None for a scene without
+        joints.
     """
 
     step: int
@@ -122,6 +175,7 @@ class StepRecord:
     angular_velocity: np.ndarray
     exists: np.ndarray
     contacts: Contacts
+    joints: JointRows | None = None
 
 
 def state_hash(record: StepRecord) -> str:
@@ -161,7 +215,15 @@ class StepBatch:
             a[:steps] for a in arrays[:5]
         )
         self.offsets = arrays[5][: steps + 1]
-        self._rows = arrays[6:]
+        end = 6 + len(CONTACT_FIELDS)
+        self._rows = arrays[6:end]
+        joint_arrays = arrays[end:]
+        # (steps, m, ...) per joint field; None for a scene without joints
+        self._joints = (
+            tuple(a[:steps] for a in joint_arrays)
+            if joint_arrays and joint_arrays[0].shape[1]
+            else None
+        )
 
     def __len__(self) -> int:
         return self.steps
@@ -176,6 +238,12 @@ class StepBatch:
         offsets[0] .. offsets[-1] are the batch's (what a compiled consumer indexes with the
         offsets)."""
         return self._rows
+
+    def joints_of(self, s: int) -> JointRows | None:
+        """The joints at the end of step s (views), or None for a scene without joints."""
+        if self._joints is None:
+            return None
+        return JointRows(*(a[s] for a in self._joints))
 
     def all_contacts(self) -> Contacts:
         """The contact rows of every step of the batch, in step order (views)."""
@@ -198,8 +266,12 @@ class StepBatch:
             for f in ("position", "angle", "velocity", "angular_velocity", "exists")
         ]
         rows = Contacts.concatenate([r.contacts for r in records])
+        joints = ()
+        if records[0].joints is not None:
+            joints = tuple(np.stack([getattr(r.joints, f) for r in records]) for f in JOINT_FIELDS)
         return StepBatch(
-            records[0].step, dt, (*state, offsets, *(getattr(rows, f) for f in CONTACT_FIELDS)),
+            records[0].step, dt,
+            (*state, offsets, *(getattr(rows, f) for f in CONTACT_FIELDS), *joints),
             len(records),
         )  # fmt: skip
 
@@ -245,3 +317,7 @@ class _BatchRecord(StepRecord):
     @cached_property
     def contacts(self) -> Contacts:
         return self._batch.contacts_of(self._s)
+
+    @cached_property
+    def joints(self) -> JointRows | None:
+        return self._batch.joints_of(self._s)

@@ -9,14 +9,31 @@ import numpy as np
 
 from isaac.engine.driver import Stepper
 from isaac.engine.integrate import DIVERGED_ANGLE, DIVERGED_POSITION, DIVERGED_SPEED, diverged_body
-from isaac.engine.records import CONTACT_FIELDS, Contacts, StepBatch, StepRecord
-from isaac.engine.step import ContactCache, StepSettings, Workspace, detect, step
+from isaac.engine.joints import JOINT_IMPULSES
+from isaac.engine.records import (
+    CONTACT_FIELDS,
+    JOINT_FIELDS,
+    Contacts,
+    JointRows,
+    StepBatch,
+    StepRecord,
+)
+from isaac.engine.step import (
+    ContactCache,
+    StepSettings,
+    Workspace,
+    detect,
+    initial_joint_rows,
+    joint_rows,
+    step,
+)
 from isaac.engine.world import Model, State, build_model, initial_state
 from isaac.errors import SimulationError
 from isaac.scene import Scene
 
 __all__ = ["DIVERGED_ANGLE", "DIVERGED_POSITION", "DIVERGED_SPEED", "BodyView", "Simulation"]
 _FIELDS = ("position", "velocity", "angle", "angular velocity")
+_LAZY = object()  # the joints of a step advance() took: made with its contacts when asked for
 
 
 class Simulation:
@@ -54,7 +71,8 @@ class Simulation:
         )
         self.state: State = initial_state(scene, self.model)
         self._contacts = Contacts.empty()
-        self._cache = ContactCache.of(self._contacts, self.model.n_bodies)
+        self._joints = initial_joint_rows(self.model, self.state, self._work)
+        self._cache = ContactCache.of(self._contacts, self.model.n_bodies, self._no_impulses())
         self._carry_in_stepper = False  # which of _cache and the stepper's Carry is current
         self._last = self.record()
         if start is not None:
@@ -73,9 +91,14 @@ class Simulation:
         """
         self._restore(record)
         self._contacts = record.contacts
-        self._cache = ContactCache.of(record.contacts, self.model.n_bodies)
+        self._joints = record.joints
+        impulses = self._no_impulses() if record.joints is None else record.joints.impulses
+        self._cache = ContactCache.of(record.contacts, self.model.n_bodies, impulses)
         self._carry_in_stepper = False
         self._last = self.record()
+
+    def _no_impulses(self) -> np.ndarray:
+        return np.zeros((self.model.joints.kind.shape[0], JOINT_IMPULSES))
 
     def _staged_cache(self) -> ContactCache:
         """What the next step reads of the last one's contacts, for the staged path."""
@@ -117,6 +140,7 @@ class Simulation:
             angular_velocity=s.angular_velocity.copy(),
             exists=s.exists.copy(),
             contacts=self._contacts_now(),
+            joints=self._joints,
         )
 
     def step(self) -> StepRecord:
@@ -144,6 +168,7 @@ class Simulation:
             self._restore(self._last)
             self._fail(failed, body, field)
         self._contacts, self._cache = contacts, cache
+        self._joints = joint_rows(self.model, self.state, self._work)
         self._last = self.record()
         return self._last
 
@@ -171,23 +196,35 @@ class Simulation:
         if body >= 0:
             # advance keeps no contacts: the state is the one before the failing step
             self._contacts = Contacts.empty() if taken or self._contacts is None else self._contacts
+            if taken or self._joints is _LAZY:
+                self._joints = initial_joint_rows(self.model, self.state, self._work)
             self._last = self.record()
             self._fail(self.state.step + 1, body, field)
         # the last step's contacts are computed again from its start if asked for (record())
         self._contacts = None
+        self._joints = _LAZY
         self._last = None
 
     def _contacts_now(self) -> Contacts:
-        """The contacts of the step that made the current state."""
+        """The contacts of the step that made the current state (and its joints, kept in
+        self._joints)."""
         if self._contacts is None:
             batch = self._stepper.redo_last(self.state)
             if batch is None:
                 self._contacts = Contacts.empty()
+                self._joints = initial_joint_rows(self.model, self.state, self._work)
             else:
                 # private writable copies, like the staged step's (a record mixing writable
                 # and read-only arrays is typed apart by compiled consumers: all_finite failed)
-                rows = StepBatch(self.state.step, self.scene.world.dt, batch, 1).contacts_of(0)
+                made = StepBatch(self.state.step, self.scene.world.dt, batch, 1)
+                rows = made.contacts_of(0)
                 self._contacts = Contacts(*(getattr(rows, f).copy() for f in CONTACT_FIELDS))
+                joints = made.joints_of(0)
+                self._joints = (
+                    None
+                    if joints is None
+                    else JointRows(*(getattr(joints, f).copy() for f in JOINT_FIELDS))
+                )
         return self._contacts
 
     def batches(self, steps: int | None = None, *, size: int = 64) -> Iterator[StepBatch]:
@@ -221,6 +258,7 @@ class Simulation:
                 batch = StepBatch(first + 1, self.scene.world.dt, arrays, taken)
                 last = batch.record(taken - 1)
                 self._contacts = last.contacts
+                self._joints = last.joints
                 self._last = last
                 yield batch
             if body >= 0:

@@ -27,9 +27,17 @@ import numpy as np
 from isaac.engine.broad_phase import SWEEP_INDEX_ROWS, find_pairs, speculative_reach
 from isaac.engine.geometry import transform
 from isaac.engine.integrate import add_gravity, advance_positions
+from isaac.engine.joints import (
+    JOINT_IMPULSES,
+    correct_joint_positions,
+    keep_joint_impulses,
+    prepare_joints,
+    write_joint_rows,
+)
+from isaac.engine.joints import WIDTH as JOINT_WIDTH
 from isaac.engine.narrow_phase import collide_pairs, match_previous
 from isaac.engine.push_out import FULL, NONE, PARTIAL, push_out
-from isaac.engine.records import Contacts
+from isaac.engine.records import Contacts, JointRows
 from isaac.engine.solver import RULE_CODES, solve_contacts
 from isaac.engine.world import Model, State
 from isaac.scene import WorldSettings
@@ -115,6 +123,9 @@ class Workspace:
         self.sweep_table = np.zeros((n, 8))
         self.push_start = np.zeros((n, 2))
         self.solver_table = np.zeros(0)  # the impulse solver's scratch, grown as it needs
+        m = model.joints.kind.shape[0]
+        self.joint_scratch = np.zeros((m, JOINT_WIDTH))  # isaac.engine.joints' rows
+        self.joint_error = np.zeros((m, 2))  # what the position pass left (m, rad)
         self._allocate(pair_capacity)
 
     def _allocate(self, pairs: int) -> None:
@@ -165,6 +176,8 @@ class ContactCache:
     """Last sub-step's contacts, keyed for axis hysteresis and warm starting.
 
     key: (m,) int64 a * n + b, ascending; the other arrays are the matching Contacts fields.
+    joints: (joints, JOINT_IMPULSES) the joints' accumulated impulses of the last sub-step
+        (`JointRows.impulses`), which the next one warm-starts from.
     """
 
     key: np.ndarray
@@ -172,15 +185,16 @@ class ContactCache:
     slot: np.ndarray
     impulse: np.ndarray
     tangent: np.ndarray
+    joints: np.ndarray
 
     @staticmethod
-    def of(contacts: Contacts, n_bodies: int) -> ContactCache:
+    def of(contacts: Contacts, n_bodies: int, joints: np.ndarray) -> ContactCache:
         c = contacts
         if len(c) and c.substep[-1] != c.substep[0]:
             last = c.substep == c.substep[-1]
             c = Contacts(**{f: getattr(c, f)[last] for f in Contacts.__dataclass_fields__})
         key = c.a.astype(np.int64) * n_bodies + c.b
-        return ContactCache(key, c.feature, c.slot, c.impulse, c.tangent_impulse)
+        return ContactCache(key, c.feature, c.slot, c.impulse, c.tangent_impulse, joints)
 
 
 def detect(
@@ -221,6 +235,7 @@ def detect(
             model.category,
             model.mask,
             model.group,
+            model.no_collide,
             work.pair_a,
             work.pair_b,
             work.pair_spare,
@@ -310,6 +325,8 @@ def resolve(
         work.push_a,
         work.push_b,
         work.solver_table,
+        tuple(model.joints),  # a plain tuple, as the driver passes it: one compiled solver
+        work.joint_scratch,
     )
 
 
@@ -349,12 +366,26 @@ def substep(
         work.push_b,
         work.push_start,
     )
-    # 5. impulses (semi-implicit Euler: gravity first, so contacts see it)
+    # 5. impulses (semi-implicit Euler: gravity first, so contacts see it), with the joints
     if not cfg.explicit:
         add_gravity(state.velocity, work.movable, state.exists, cfg.gx, cfg.gy, cfg.h)
+    joints = work.joint_scratch.shape[0] > 0
+    if joints:
+        prepare_joints(
+            model.joints,
+            work.joint_scratch,
+            state.position,
+            state.angle,
+            state.exists,
+            model.inv_mass,
+            model.inv_inertia,
+            cfg.h,
+            cache.joints,
+            cfg.warm_starting,
+        )
     if solve:
         resolve(model, cfg, state, work, cache, rows)
-    # 6. integration (the seed's explicit Euler: gravity last)
+    # 6. integration (the seed's explicit Euler: gravity last), then the joints' position pass
     advance_positions(
         state.position,
         state.angle,
@@ -366,7 +397,71 @@ def substep(
     )
     if cfg.explicit:
         add_gravity(state.velocity, work.movable, state.exists, cfg.gx, cfg.gy, cfg.h)
+    if joints:
+        correct_joint_positions(
+            model.joints,
+            state.position,
+            state.angle,
+            state.exists,
+            model.inv_mass,
+            model.inv_inertia,
+            cfg.position_iterations,
+            work.joint_error,
+        )
     return work.contacts(rows, index)
+
+
+def joint_rows(model: Model, state: State, work: Workspace) -> JointRows | None:
+    """The joints at the end of the step just taken (private copies), or None without joints."""
+    m = work.joint_scratch.shape[0]
+    if m == 0:
+        return None
+    rows = JointRows.empty(m)
+    write_joint_rows(
+        model.joints,
+        work.joint_scratch,
+        state.position,
+        state.angle,
+        state.exists,
+        work.joint_error,
+        rows.anchor_a,
+        rows.anchor_b,
+        rows.linear_impulse,
+        rows.angular_impulse,
+        rows.motor_impulse,
+        rows.limit_impulse,
+        rows.impulses,
+        rows.error,
+    )
+    return rows
+
+
+def initial_joint_rows(model: Model, state: State, work: Workspace) -> JointRows | None:
+    """The joints at a state no step has made (step 0): anchors and errors, no impulse."""
+    m = work.joint_scratch.shape[0]
+    if m == 0:
+        return None
+    prepare_joints(
+        model.joints,
+        work.joint_scratch,
+        state.position,
+        state.angle,
+        state.exists,
+        model.inv_mass,
+        model.inv_inertia,
+        1.0,
+        np.zeros((m, JOINT_IMPULSES)),
+        False,
+    )
+    work.joint_error[:] = 0.0
+    return joint_rows(model, state, work)
+
+
+def joint_carry(work: Workspace) -> np.ndarray:
+    """The accumulated joint impulses the next sub-step warm-starts from."""
+    carry = np.zeros((work.joint_scratch.shape[0], JOINT_IMPULSES))
+    keep_joint_impulses(work.joint_scratch, carry)
+    return carry
 
 
 def step(
@@ -384,7 +479,7 @@ def step(
     parts = []
     for index in range(cfg.substeps):
         contacts = substep(model, cfg, state, work, cache, index, solve)
-        cache = ContactCache.of(contacts, model.n_bodies)
+        cache = ContactCache.of(contacts, model.n_bodies, joint_carry(work))
         parts.append(contacts)
     state.step += 1
     if model.timed:

@@ -16,7 +16,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from isaac.scene import Scene, circle, polygon
+from isaac.engine.joints import Joints, joint_table
+from isaac.scene import Scene, checks, circle, polygon
 
 
 @dataclass(frozen=True, eq=False)
@@ -45,8 +46,12 @@ class Model:
         (leaves_at is +inf for a body that never leaves).
     timed: whether any body enters after time 0 or ever leaves (existence can change).
     category, mask, group: (n,) int64, the collision filter (isaac.collision_filter).
-    filtered: whether any body's filter is not the default (else the broad phase tests none).
+    filtered: whether the broad phase must test pairs against a filter: some body's filter is
+        not the default, or a joint keeps its bodies from colliding (else it tests none).
     circles: whether any body is a circle (else no circle code runs).
+    joints: the scene's joints as arrays (`isaac.engine.joints.Joints`, m rows; m = 0: none,
+        and no joint code runs).
+    no_collide: (p,) int64 sorted keys a * n + b (a < b) of the pairs joints keep apart.
     """
 
     names: tuple[str, ...]
@@ -70,6 +75,8 @@ class Model:
     group: np.ndarray
     filtered: bool
     circles: bool
+    joints: Joints
+    no_collide: np.ndarray
 
     @property
     def n_bodies(self) -> int:
@@ -167,6 +174,10 @@ def build_model(scene: Scene) -> Model:
     leaves_at = np.array(
         [np.inf if b.leaves_at is None else b.leaves_at for b in scene.bodies], dtype=np.float64
     )
+    refusal = checks.joint_solver_problem(scene.world.solver, scene.joints)
+    if refusal is not None:  # a scene built in Python (the loader refuses it at its key)
+        raise ValueError(refusal)
+    joints, no_collide = joint_table(scene.joints, n)
     return Model(
         names=tuple(b.name for b in scene.bodies),
         vertices_local=verts,
@@ -187,8 +198,10 @@ def build_model(scene: Scene) -> Model:
         category=np.array([b.category for b in scene.bodies], dtype=np.int64),
         mask=np.array([b.mask for b in scene.bodies], dtype=np.int64),
         group=np.array([b.group for b in scene.bodies], dtype=np.int64),
-        filtered=any(b.filtered for b in scene.bodies),
+        filtered=any(b.filtered for b in scene.bodies) or len(no_collide) > 0,
         circles=any(b.circle is not None for b in scene.bodies),
+        joints=joints,
+        no_collide=no_collide,
     )
 
 

@@ -68,6 +68,8 @@ def solve_contacts(
     c_push_a,
     c_push_b,
     table,
+    joints,
+    joint_scratch,
 ):
     """Resolve every contact row; writes the impulses applied (N s) and the restitution used.
 
@@ -89,6 +91,9 @@ def solve_contacts(
 
     The two solvers are separate compiled kernels chosen here, so each is compiled only when a
     run first uses it.
+    joints, joint_scratch: the joint table and its prepared rows (`isaac.engine.joints`),
+    solved by the sequential solver between its passes; the seed's solver has no joint rows
+    (a scene with joints cannot choose it: the scene loader refuses).
     """
     if seed_solver:
         solve_seed(
@@ -153,4 +158,6 @@ def solve_contacts(
         c_push_a,
         c_push_b,
         table,
+        joints,
+        joint_scratch,
     )

@@ -7,6 +7,7 @@ import numba
 import numpy as np
 
 from isaac.engine import kernel_cache  # noqa: F401  (first: keys the kernels' numba cache)
+from isaac.engine.joints import Joints, solve_joint_velocities, warm_start_joints
 from isaac.engine.solver.mixing import combine
 from isaac.engine.solver.passes import run_passes
 from isaac.engine.solver.rows import apply_bounce_back, row_terms
@@ -70,9 +71,16 @@ def solve_sequential(
     c_push_a,
     c_push_b,
     table,
+    joints,
+    jt,
 ):
     """solve_contacts with the sequential solver: accumulated, clamped impulses, warm started,
     `iterations` Gauss-Seidel passes over every unit.
+
+    joints, jt: the joint table (`isaac.engine.joints.Joints`, a plain tuple) and its scratch
+    rows, prepared for this sub-step (`prepare_joints`); with joints each iteration is the
+    contacts' pass, then the joints' (their impulses accumulate in jt). Without joints
+    (jt has no rows) the passes run as before, all at once.
 
     Lays the group table of schedule's groups out in `table` (or a larger one, returned) and
     fills it with each row's terms, applies the warm-start impulses (last step's accumulated
@@ -80,8 +88,10 @@ def solve_sequential(
     accumulated impulses to c_impulse / c_tangent. (Several small kernels rather than one: numba
     compiles them in a fraction of the time.)
     """
-    if rows == 0:  # nothing to solve: the velocities stay as they are
+    n_joints = jt.shape[0]
+    if rows == 0 and n_joints == 0:  # nothing to solve: the velocities stay as they are
         return table
+    J = Joints(*joints)
     n = velocity.shape[0]
     v = np.empty((n, 3))  # the velocities (vx, vy, w) and inverse masses, packed per body
     inv = np.empty((n, 2))
@@ -143,13 +153,10 @@ def solve_sequential(
             v[b, 0] += px * inv[b, 0]
             v[b, 1] += py * inv[b, 0]
             v[b, 2] += warm[k, 3] * inv[b, 1]
+    if n_joints and warm_starting:
+        warm_start_joints(J, jt, v, inv)
     # the velocities into each moving body's first unit and every unit side with a concrete body
-    for body in range(n):
-        at = first[body]
-        if at >= 0:
-            t[at] = v[body, 0]
-            t[at + LANES] = v[body, 1]
-            t[at + 2 * LANES] = v[body, 2]
+    _to_first_units(t, first, v)
     for f in range(fixed.shape[0]):
         at = fixed[f]
         body = fixed_body[f]
@@ -157,16 +164,19 @@ def solve_sequential(
         t[at + LANES] = v[body, 1]
         t[at + 2 * LANES] = v[body, 2]
 
-    run_passes(t, kind, successor, groups, iterations)
+    if n_joints == 0:
+        run_passes(t, kind, successor, groups, iterations)
+    else:
+        # after each pass the velocities are back in each body's first unit (its successor)
+        for _ in range(iterations):
+            run_passes(t, kind, successor, groups, 1)
+            _from_first_units(t, first, v)
+            solve_joint_velocities(J, jt, v, inv, h)
+            _to_first_units(t, first, v)
 
     # the velocities the passes handed back to each moving body's first unit, and every row's
     # accumulated impulses
-    for body in range(n):
-        at = first[body]
-        if at >= 0:
-            v[body, 0] = t[at]
-            v[body, 1] = t[at + LANES]
-            v[body, 2] = t[at + 2 * LANES]
+    _from_first_units(t, first, v)
     for g in range(groups):
         base = g * GROUP_WIDTH
         for j in range(LANES):
@@ -197,6 +207,26 @@ def solve_sequential(
         c_push_b,
     )
     return table
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _to_first_units(t, first, v):
+    for body in range(v.shape[0]):
+        at = first[body]
+        if at >= 0:
+            t[at] = v[body, 0]
+            t[at + LANES] = v[body, 1]
+            t[at + 2 * LANES] = v[body, 2]
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _from_first_units(t, first, v):
+    for body in range(v.shape[0]):
+        at = first[body]
+        if at >= 0:
+            v[body, 0] = t[at]
+            v[body, 1] = t[at + LANES]
+            v[body, 2] = t[at + 2 * LANES]
 
 
 @numba.njit(cache=True, nogil=True)

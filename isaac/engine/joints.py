@@ -1,0 +1,730 @@
+"""Joints: revolute, distance, weld and prismatic constraints, solved with the contacts.
+
+Each sub-step, inside the sequential solver (isaac.engine.solver.sequential):
+1. `prepare_joints`: the world anchor arms r = R(angle) local, axes, effective masses, the
+   limits' current values and the springs' soft coefficients, from the poses after the
+   push-out;
+2. `warm_start_joints`: last sub-step's accumulated impulses applied first (as contacts are);
+3. `solve_joint_velocities`: one Gauss-Seidel pass over the joints, between the contact passes
+   (each velocity iteration: the contacts' pass, then the joints'), accumulating impulses.
+After integration, `correct_joint_positions` (Box2D 2.3's non-linear Gauss-Seidel, b2Joint::
+SolvePositionConstraints) moves the bodies back onto their rigid constraints, `iterations`
+passes, each joint's correction capped (MAX_LINEAR_CORRECTION, MAX_ANGULAR_CORRECTION), so the
+state a step ends with keeps the chains together instead of letting them drift.
+
+Velocity constraints (Box2D 2.3's joints, sign conventions: an impulse P is applied as -P to a
+and +P to b at the anchors; v_a, w_a, v_b, w_b the bodies' velocities):
+- revolute: the anchors' relative velocity v_b + w_b x r_b - v_a - w_a x r_a = 0 (a 2x2
+  effective mass); a motor w_b - w_a = speed with |impulse| <= max_torque h; limits on the
+  angle q = wrap(angle_b - angle_a - reference) as one-sided constraints (impulse >= 0) that let
+  a limit still open by C close within the sub-step (C / h, as speculative contacts do).
+- distance: along the unit axis u between the anchors: rigid (length fixed), a spring of
+  frequency f and damping ratio z (Catto's soft constraint: omega = 2 pi f, a1 = 2 z + h omega,
+  a2 = h omega a1, bias rate omega / a1, mass scale a2 / (1 + a2), impulse scale 1 / (1 + a2)),
+  and one-sided limits min_length / max_length.
+- weld: the revolute's point constraint and w_b - w_a = 0, rigid or an angular spring.
+- prismatic: along the axis's normal p and the relative rotation, both at once (2x2), a motor
+  and limits along the axis u.
+A joint whose two bodies do not both exist does nothing. Position errors are left to
+`correct_joint_positions`, except for springs, which pull by their bias.
+
+The joint table (Joints) holds the scene's joints as arrays; the scratch `jt` (m, WIDTH) one row
+per joint, columns named below; the accumulated impulses are columns J0 .. JU (the warm start
+carry, `JOINT_IMPULSES` of them).
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numba
+import numpy as np
+
+from isaac import trig
+from isaac.engine import kernel_cache  # noqa: F401  (first: keys the kernels' numba cache)
+
+REVOLUTE = 0
+DISTANCE = 1
+WELD = 2
+PRISMATIC = 3
+KIND_CODES = {"revolute": REVOLUTE, "distance": DISTANCE, "weld": WELD, "prismatic": PRISMATIC}
+
+# Box2D 2.3's caps on one position correction (b2_maxLinearCorrection, b2_maxAngularCorrection)
+MAX_LINEAR_CORRECTION = 0.2  # m
+MAX_ANGULAR_CORRECTION = 8.0 / 180.0 * np.pi  # rad
+
+PI = np.pi
+TWO_PI = 2.0 * np.pi
+
+# scratch columns
+RAX, RAY, RBX, RBY = 0, 1, 2, 3  # world anchor arms (m)
+UX, UY = 4, 5  # distance: unit axis a -> b; prismatic: the slide axis (world)
+PX, PY = 6, 7  # prismatic: the axis's normal
+K11, K12, K22 = 8, 9, 10  # inverse of the 2x2 effective mass (point, or prismatic normal+angle)
+KA = 11  # 1 / angular effective mass (motor, limits, weld)
+KAX = 12  # 1 / effective mass along the axis (distance, prismatic)
+CL, CU = 13, 14  # how far inside the lower / upper limit (m or rad; < 0: beyond it)
+BIAS, MS, IS = 15, 16, 17  # a spring's bias velocity and soft mass / impulse scales
+A1, A2, S1, S2 = 18, 19, 20, 21  # prismatic: (d + r_a) x u, r_b x u, (d + r_a) x p, r_b x p
+ON = 22  # 1.0 when both bodies exist
+J0, J1, J2, JM, JL, JU = 23, 24, 25, 26, 27, 28  # accumulated impulses
+DX, DY = 29, 30  # the anchors' separation b - a (m, world) after the push-out
+WIDTH = 31
+JOINT_IMPULSES = 6  # J0 .. JU: point x / normal, point y / rotation, axial / angular, motor,
+# lower limit, upper limit (N s, or N m s for rotations)
+
+
+class Joints(NamedTuple):
+    """The scene's joints as the compiled kernels take them (`isaac.scene.JointSpec`'s fields,
+    one row per joint; "none" as flags)."""
+
+    kind: np.ndarray  # (m,) int64, REVOLUTE .. PRISMATIC
+    a: np.ndarray  # (m,) int64 body indices
+    b: np.ndarray
+    local_a: np.ndarray  # (m, 2) m, a's frame
+    local_b: np.ndarray  # (m, 2) m, b's frame
+    axis: np.ndarray  # (m, 2) unit, a's frame (prismatic)
+    reference_angle: np.ndarray  # (m,) rad
+    length: np.ndarray  # (m,) m (distance)
+    rigid: np.ndarray  # (m,) bool: distance without spring or limits; weld without spring
+    has_limit: np.ndarray  # (m,) bool
+    lower: np.ndarray  # (m,) rad or m (distance: min length, -inf when none)
+    upper: np.ndarray  # (m,) (distance: max length, +inf when none)
+    spring: np.ndarray  # (m,) bool
+    stiffness: np.ndarray  # (m,) Hz
+    damping_ratio: np.ndarray  # (m,)
+    has_motor: np.ndarray  # (m,) bool
+    motor_speed: np.ndarray  # (m,) rad/s or m/s
+    max_motor: np.ndarray  # (m,) N m or N
+
+
+def joint_table(joints, n_bodies: int) -> tuple[Joints, np.ndarray]:
+    """(Joints, no_collide) of a scene's JointSpecs: no_collide is the sorted int64 keys
+    min * n + max of the body pairs that a joint keeps from colliding (collide_connected false),
+    which the broad phase drops."""
+    m = len(joints)
+
+    def col(get, dtype=np.float64):
+        return np.array([get(j) for j in joints], dtype=dtype).reshape(m)
+
+    def pairs(get):
+        return np.array([get(j) for j in joints], dtype=np.float64).reshape(m, 2)
+
+    def limits(j):
+        if j.kind == "distance":
+            lo = -np.inf if j.min_length is None else j.min_length
+            hi = np.inf if j.max_length is None else j.max_length
+            return lo, hi
+        lo = -np.inf if j.lower is None else j.lower
+        hi = np.inf if j.upper is None else j.upper
+        return lo, hi
+
+    has_limit = col(
+        lambda j: (
+            (j.min_length, j.max_length) != (None, None)
+            if j.kind == "distance"
+            else (j.lower, j.upper) != (None, None)
+        ),
+        bool,
+    )
+    spring = col(lambda j: j.stiffness is not None and j.kind in ("distance", "weld"), bool)
+    table = Joints(
+        kind=col(lambda j: KIND_CODES[j.kind], np.int64),
+        a=col(lambda j: j.a, np.int64),
+        b=col(lambda j: j.b, np.int64),
+        local_a=pairs(lambda j: j.local_a),
+        local_b=pairs(lambda j: j.local_b),
+        axis=pairs(lambda j: j.axis),
+        reference_angle=col(lambda j: j.reference_angle),
+        length=col(lambda j: j.length),
+        rigid=col(lambda j: j.stiffness is None, bool) & ~(has_limit & (col(_is_distance, bool))),
+        has_limit=has_limit,
+        lower=col(lambda j: limits(j)[0]),
+        upper=col(lambda j: limits(j)[1]),
+        spring=spring,
+        stiffness=col(lambda j: 0.0 if j.stiffness is None else j.stiffness),
+        damping_ratio=col(lambda j: j.damping_ratio),
+        has_motor=col(lambda j: j.motor_speed is not None, bool),
+        motor_speed=col(lambda j: 0.0 if j.motor_speed is None else j.motor_speed),
+        max_motor=col(lambda j: j.max_motor),
+    )
+    keys = sorted(
+        {min(j.a, j.b) * n_bodies + max(j.a, j.b) for j in joints if not j.collide_connected}
+    )
+    return table, np.array(keys, dtype=np.int64)
+
+
+def _is_distance(j) -> bool:
+    return j.kind == "distance"
+
+
+sin_cos = numba.njit(cache=True, nogil=True)(trig.sin_cos)
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _wrap(angle):
+    """Into [-pi, pi] by whole turns (isaac.engine.world.wrap_angle's rule); a non-finite
+    angle is left as it is (the divergence check stops the run)."""
+    if not abs(angle) < 1e9:  # diverged (or not finite): the step's divergence check stops it
+        return angle
+    while angle > PI:
+        angle -= TWO_PI
+    while angle < -PI:
+        angle += TWO_PI
+    return angle
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _arm(local, k, angle):
+    s, c = sin_cos(angle)
+    return c * local[k, 0] - s * local[k, 1], s * local[k, 0] + c * local[k, 1]
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _inverse_2x2(k11, k12, k22):
+    det = k11 * k22 - k12 * k12
+    if det != 0.0:
+        det = 1.0 / det
+    return det * k22, -det * k12, det * k11
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _point_mass(ma, ia, mb, ib, rax, ray, rbx, rby):
+    """Inverse of the 2x2 effective mass of a point-to-point constraint."""
+    k11 = ma + mb + ia * ray * ray + ib * rby * rby
+    k12 = -ia * rax * ray - ib * rbx * rby
+    k22 = ma + mb + ia * rax * rax + ib * rbx * rbx
+    return _inverse_2x2(k11, k12, k22)
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _inv_or_zero(k):
+    return 1.0 / k if k > 0.0 else 0.0
+
+
+@numba.njit(cache=True, nogil=True)
+def prepare_joints(J, jt, position, angle, exists, inv_mass, inv_inertia, h, warm, warm_starting):
+    """Fill the scratch rows for this sub-step (poses after the push-out) and load the
+    accumulated impulses: `warm` (m, JOINT_IMPULSES), last sub-step's, when warm_starting
+    (else they start from zero)."""
+    for k in range(J.kind.shape[0]):
+        a = J.a[k]
+        b = J.b[k]
+        t = jt[k]
+        for c in range(WIDTH):
+            t[c] = 0.0
+        if not (exists[a] and exists[b]):
+            continue
+        t[ON] = 1.0
+        rax, ray = _arm(J.local_a, k, angle[a])
+        rbx, rby = _arm(J.local_b, k, angle[b])
+        t[RAX] = rax
+        t[RAY] = ray
+        t[RBX] = rbx
+        t[RBY] = rby
+        ma = inv_mass[a]
+        ia = inv_inertia[a]
+        mb = inv_mass[b]
+        ib = inv_inertia[b]
+        t[KA] = _inv_or_zero(ia + ib)
+        dx = position[b, 0] + rbx - position[a, 0] - rax
+        dy = position[b, 1] + rby - position[a, 1] - ray
+        t[DX] = dx
+        t[DY] = dy
+        kind = J.kind[k]
+        q = _wrap(angle[b] - angle[a] - J.reference_angle[k])
+        c_now = 0.0  # the spring's stretch (m or rad)
+        if kind == REVOLUTE or kind == WELD:
+            t[K11], t[K12], t[K22] = _point_mass(ma, ia, mb, ib, rax, ray, rbx, rby)
+            t[CL] = q - J.lower[k]
+            t[CU] = J.upper[k] - q
+            c_now = q
+        elif kind == DISTANCE:
+            d = np.sqrt(dx * dx + dy * dy)
+            ux = 1.0
+            uy = 0.0
+            if d > 0.0:
+                ux = dx / d
+                uy = dy / d
+            t[UX] = ux
+            t[UY] = uy
+            cra = rax * uy - ray * ux
+            crb = rbx * uy - rby * ux
+            t[KAX] = _inv_or_zero(ma + mb + ia * cra * cra + ib * crb * crb)
+            t[CL] = d - J.lower[k]
+            t[CU] = J.upper[k] - d
+            c_now = d - J.length[k]
+        else:  # PRISMATIC
+            s, c = sin_cos(angle[a])
+            ux = c * J.axis[k, 0] - s * J.axis[k, 1]
+            uy = s * J.axis[k, 0] + c * J.axis[k, 1]
+            px = -uy
+            py = ux
+            t[UX] = ux
+            t[UY] = uy
+            t[PX] = px
+            t[PY] = py
+            # arms of a: from a's centre to b's anchor (d + r_a); of b: r_b
+            a1 = (dx + rax) * uy - (dy + ray) * ux
+            a2 = rbx * uy - rby * ux
+            s1 = (dx + rax) * py - (dy + ray) * px
+            s2 = rbx * py - rby * px
+            t[A1] = a1
+            t[A2] = a2
+            t[S1] = s1
+            t[S2] = s2
+            t[KAX] = _inv_or_zero(ma + mb + ia * a1 * a1 + ib * a2 * a2)
+            k22 = ia + ib
+            if k22 == 0.0:
+                k22 = 1.0  # two bodies that cannot turn: the rotation row is idle
+            t[K11], t[K12], t[K22] = _inverse_2x2(
+                ma + mb + ia * s1 * s1 + ib * s2 * s2, ia * s1 + ib * s2, k22
+            )
+            translation = ux * dx + uy * dy
+            t[CL] = translation - J.lower[k]
+            t[CU] = J.upper[k] - translation
+        if J.spring[k]:
+            omega = TWO_PI * J.stiffness[k]
+            a1s = 2.0 * J.damping_ratio[k] + h * omega
+            a2s = h * omega * a1s
+            a3s = 1.0 / (1.0 + a2s)
+            t[BIAS] = omega / a1s * c_now
+            t[MS] = a2s * a3s
+            t[IS] = a3s
+        if warm_starting:
+            for c in range(JOINT_IMPULSES):
+                t[J0 + c] = warm[k, c]
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _apply(v, inv, a, b, px, py, la, lb):
+    """-P (and angular -la) to a, +P (and +lb) to b."""
+    v[a, 0] -= px * inv[a, 0]
+    v[a, 1] -= py * inv[a, 0]
+    v[a, 2] -= la * inv[a, 1]
+    v[b, 0] += px * inv[b, 0]
+    v[b, 1] += py * inv[b, 0]
+    v[b, 2] += lb * inv[b, 1]
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _push(J, t, k, v, inv, impulses):
+    """Apply impulses (J0 .. JU layout) of joint k as the solve does, with this row's arms."""
+    a = J.a[k]
+    b = J.b[k]
+    kind = J.kind[k]
+    rax = t[RAX]
+    ray = t[RAY]
+    rbx = t[RBX]
+    rby = t[RBY]
+    j0, j1, j2, jm, jl, ju = impulses
+    if kind == REVOLUTE or kind == WELD:
+        ang = jm + jl - ju + j2
+        _apply(v, inv, a, b, j0, j1, rax * j1 - ray * j0 + ang, rbx * j1 - rby * j0 + ang)
+    elif kind == DISTANCE:
+        axial = j2 + jl - ju
+        ux = t[UX]
+        uy = t[UY]
+        _apply(
+            v,
+            inv,
+            a,
+            b,
+            axial * ux,
+            axial * uy,
+            axial * (rax * uy - ray * ux),
+            axial * (rbx * uy - rby * ux),
+        )
+    else:
+        axial = jm + jl - ju
+        _apply(
+            v,
+            inv,
+            a,
+            b,
+            j0 * t[PX] + axial * t[UX],
+            j0 * t[PY] + axial * t[UY],
+            j0 * t[S1] + j1 + axial * t[A1],
+            j0 * t[S2] + j1 + axial * t[A2],
+        )
+
+
+@numba.njit(cache=True, nogil=True)
+def warm_start_joints(J, jt, v, inv):
+    """Apply every active joint's loaded impulses (last sub-step's) to the velocities."""
+    for k in range(J.kind.shape[0]):
+        t = jt[k]
+        if t[ON] == 0.0:
+            continue
+        _push(J, t, k, v, inv, (t[J0], t[J1], t[J2], t[JM], t[JL], t[JU]))
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _one_sided(t, col, cdot, c, inv_h, mass):
+    """A limit's new accumulated impulse (>= 0) and its increment: a limit still open by c > 0
+    may close within the sub-step (c / h), one reached or passed holds (position errors are
+    the position pass's)."""
+    if c == np.inf:  # no limit on this side
+        return 0.0
+    bias = c * inv_h if c > 0.0 else 0.0
+    old = t[col]
+    new = max(old - mass * (cdot + bias), 0.0)
+    t[col] = new
+    return new - old
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _end_separation(t, v, a, b, h):
+    """How the anchors' separation b - a (m) changes over a sub-step of h at velocities v:
+    each arm r turned by h w to second order, r (1 - (h w)^2 / 2) + h w x r (the rotation's own
+    error is O((h w)^3)). The separation itself is left to the position pass: fed back here as
+    well (Baumgarte at full strength), a 40-link chain blew up within a second."""
+    hwa = h * v[a, 2]
+    hwb = h * v[b, 2]
+    ca = -0.5 * hwa * hwa
+    cb = -0.5 * hwb * hwb
+    rax = t[RAX]
+    ray = t[RAY]
+    rbx = t[RBX]
+    rby = t[RBY]
+    ex = h * (v[b, 0] - v[a, 0]) + (rbx * cb - rby * hwb) - (rax * ca - ray * hwa)
+    ey = h * (v[b, 1] - v[a, 1]) + (rby * cb + rbx * hwb) - (ray * ca + rax * hwa)
+    return ex, ey
+
+
+@numba.njit(cache=True, nogil=True)
+def solve_joint_velocities(J, jt, v, inv, h):
+    """One Gauss-Seidel pass over the joints (velocities v (n, 3): vx, vy, w; in place)."""
+    inv_h = 1.0 / h
+    for k in range(J.kind.shape[0]):
+        t = jt[k]
+        if t[ON] == 0.0:
+            continue
+        a = J.a[k]
+        b = J.b[k]
+        kind = J.kind[k]
+        rax = t[RAX]
+        ray = t[RAY]
+        rbx = t[RBX]
+        rby = t[RBY]
+        if kind == REVOLUTE or kind == WELD:
+            if kind == REVOLUTE and J.has_motor[k]:
+                cdot = v[b, 2] - v[a, 2] - J.motor_speed[k]
+                old = t[JM]
+                most = J.max_motor[k] * h
+                new = min(max(old - t[KA] * cdot, -most), most)
+                t[JM] = new
+                _apply(v, inv, a, b, 0.0, 0.0, new - old, new - old)
+            if kind == REVOLUTE and J.has_limit[k]:
+                d = _one_sided(t, JL, v[b, 2] - v[a, 2], t[CL], inv_h, t[KA])
+                _apply(v, inv, a, b, 0.0, 0.0, d, d)
+                d = _one_sided(t, JU, v[a, 2] - v[b, 2], t[CU], inv_h, t[KA])
+                _apply(v, inv, a, b, 0.0, 0.0, -d, -d)
+            if kind == WELD:
+                cdot = v[b, 2] - v[a, 2]
+                if J.spring[k]:
+                    d = -t[MS] * t[KA] * (cdot + t[BIAS]) - t[IS] * t[J2]
+                else:
+                    d = -t[KA] * cdot
+                t[J2] += d
+                _apply(v, inv, a, b, 0.0, 0.0, d, d)
+            # the anchors' separation at the end of the sub-step, at the velocities so far
+            ex, ey = _end_separation(t, v, a, b, h)
+            ix = -(t[K11] * ex + t[K12] * ey) * inv_h
+            iy = -(t[K12] * ex + t[K22] * ey) * inv_h
+            t[J0] += ix
+            t[J1] += iy
+            _apply(v, inv, a, b, ix, iy, rax * iy - ray * ix, rbx * iy - rby * ix)
+        elif kind == DISTANCE:
+            ux = t[UX]
+            uy = t[UY]
+            cra = rax * uy - ray * ux
+            crb = rbx * uy - rby * ux
+            for part in range(3):
+                # relative velocity of the anchors along u (b's less a's)
+                cdot = ux * (v[b, 0] - v[b, 2] * rby - v[a, 0] + v[a, 2] * ray) + uy * (
+                    v[b, 1] + v[b, 2] * rbx - v[a, 1] - v[a, 2] * rax
+                )
+                if part == 0:
+                    if J.spring[k]:
+                        d = -t[MS] * t[KAX] * (cdot + t[BIAS]) - t[IS] * t[J2]
+                    elif J.rigid[k]:
+                        # the length at the end of the sub-step, at the velocities so far
+                        ex, ey = _end_separation(t, v, a, b, h)
+                        ex += t[DX]
+                        ey += t[DY]
+                        now = np.sqrt(t[DX] * t[DX] + t[DY] * t[DY])
+                        d = -t[KAX] * (np.sqrt(ex * ex + ey * ey) - now) * inv_h
+                    else:
+                        continue
+                    t[J2] += d
+                elif not J.has_limit[k]:
+                    break
+                elif part == 1:
+                    d = _one_sided(t, JL, cdot, t[CL], inv_h, t[KAX])
+                else:
+                    d = -_one_sided(t, JU, -cdot, t[CU], inv_h, t[KAX])
+                _apply(v, inv, a, b, d * ux, d * uy, d * cra, d * crb)
+        else:  # PRISMATIC
+            ux = t[UX]
+            uy = t[UY]
+            a1 = t[A1]
+            a2 = t[A2]
+            if J.has_motor[k] or J.has_limit[k]:
+                for part in range(3):
+                    cdot = (
+                        ux * (v[b, 0] - v[a, 0]) + uy * (v[b, 1] - v[a, 1])
+                        + a2 * v[b, 2] - a1 * v[a, 2]
+                    )  # fmt: skip
+                    if part == 0:
+                        if not J.has_motor[k]:
+                            continue
+                        old = t[JM]
+                        most = J.max_motor[k] * h
+                        new = min(max(old - t[KAX] * (cdot - J.motor_speed[k]), -most), most)
+                        t[JM] = new
+                        d = new - old
+                    elif not J.has_limit[k]:
+                        break
+                    elif part == 1:
+                        d = _one_sided(t, JL, cdot, t[CL], inv_h, t[KAX])
+                    else:
+                        d = -_one_sided(t, JU, -cdot, t[CU], inv_h, t[KAX])
+                    _apply(v, inv, a, b, d * ux, d * uy, d * a1, d * a2)
+            px = t[PX]
+            py = t[PY]
+            s1 = t[S1]
+            s2 = t[S2]
+            c1 = px * (v[b, 0] - v[a, 0]) + py * (v[b, 1] - v[a, 1]) + s2 * v[b, 2] - s1 * v[a, 2]
+            c2 = v[b, 2] - v[a, 2]
+            i1 = -(t[K11] * c1 + t[K12] * c2)
+            i2 = -(t[K12] * c1 + t[K22] * c2)
+            t[J0] += i1
+            t[J1] += i2
+            _apply(v, inv, a, b, i1 * px, i1 * py, i1 * s1 + i2, i1 * s2 + i2)
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _clamp(x, most):
+    return min(max(x, -most), most)
+
+
+@numba.njit(cache=True, nogil=True)
+def correct_joint_positions(J, position, angle, exists, inv_mass, inv_inertia, iterations, error):
+    """After integration: `iterations` Gauss-Seidel passes that move each joint's bodies back
+    onto its rigid constraints (positions and angles in place, angles wrapped), and then each
+    joint's remaining error into error (m, 2): the anchors' distance off the constraint (m)
+    and the rotation off it (rad; weld and prismatic), 0 for what a joint leaves free.
+
+    Per joint (Box2D 2.3's SolvePositionConstraints): revolute, its angle limits then the
+    anchors together (2x2); weld, the rotation then the anchors; distance, the length (rigid)
+    or the limit it is past; prismatic, the axis's normal and the rotation (2x2), then the
+    limit it is past. Springs are not corrected: their stretch is their force. Each correction
+    is capped at MAX_LINEAR_CORRECTION (m) and MAX_ANGULAR_CORRECTION (rad)."""
+    m = J.kind.shape[0]
+    for _ in range(iterations):
+        for k in range(m):
+            a = J.a[k]
+            b = J.b[k]
+            if not (exists[a] and exists[b]):
+                continue
+            _correct(J, k, a, b, position, angle, inv_mass, inv_inertia)
+    for k in range(m):
+        a = J.a[k]
+        b = J.b[k]
+        error[k, 0] = 0.0
+        error[k, 1] = 0.0
+        if exists[a] and exists[b]:
+            error[k, 0], error[k, 1] = _error(J, k, a, b, position, angle)
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _separation(J, k, a, b, position, angle):
+    rax, ray = _arm(J.local_a, k, angle[a])
+    rbx, rby = _arm(J.local_b, k, angle[b])
+    dx = position[b, 0] + rbx - position[a, 0] - rax
+    dy = position[b, 1] + rby - position[a, 1] - ray
+    return rax, ray, rbx, rby, dx, dy
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _move(position, angle, inv_mass, inv_inertia, a, b, px, py, la, lb):
+    position[a, 0] -= px * inv_mass[a]
+    position[a, 1] -= py * inv_mass[a]
+    angle[a] = _wrap(angle[a] - la * inv_inertia[a])
+    position[b, 0] += px * inv_mass[b]
+    position[b, 1] += py * inv_mass[b]
+    angle[b] = _wrap(angle[b] + lb * inv_inertia[b])
+
+
+@numba.njit(cache=True, nogil=True)
+def _correct(J, k, a, b, position, angle, inv_mass, inv_inertia):
+    ma = inv_mass[a]
+    ia = inv_inertia[a]
+    mb = inv_mass[b]
+    ib = inv_inertia[b]
+    kind = J.kind[k]
+    if kind == REVOLUTE or kind == WELD:
+        q = _wrap(angle[b] - angle[a] - J.reference_angle[k])
+        c = 0.0
+        if kind == WELD and J.rigid[k]:
+            c = q
+        elif kind == REVOLUTE and J.has_limit[k]:
+            if q < J.lower[k]:
+                c = q - J.lower[k]
+            elif q > J.upper[k]:
+                c = q - J.upper[k]
+        if c != 0.0 and ia + ib > 0.0:
+            lam = -_clamp(c, MAX_ANGULAR_CORRECTION) / (ia + ib)
+            _move(position, angle, inv_mass, inv_inertia, a, b, 0.0, 0.0, lam, lam)
+        rax, ray, rbx, rby, dx, dy = _separation(J, k, a, b, position, angle)
+        length = np.sqrt(dx * dx + dy * dy)
+        if length > MAX_LINEAR_CORRECTION:  # capped, along the same direction
+            scale = MAX_LINEAR_CORRECTION / length
+            dx *= scale
+            dy *= scale
+        k11, k12, k22 = _point_mass(ma, ia, mb, ib, rax, ray, rbx, rby)
+        px = -(k11 * dx + k12 * dy)
+        py = -(k12 * dx + k22 * dy)
+        _move(
+            position, angle, inv_mass, inv_inertia, a, b, px, py,
+            rax * py - ray * px, rbx * py - rby * px,
+        )  # fmt: skip
+    elif kind == DISTANCE:
+        rax, ray, rbx, rby, dx, dy = _separation(J, k, a, b, position, angle)
+        d = np.sqrt(dx * dx + dy * dy)
+        if d == 0.0:
+            return
+        c = 0.0
+        if J.rigid[k]:
+            c = d - J.length[k]
+        elif d < J.lower[k]:
+            c = d - J.lower[k]
+        elif d > J.upper[k]:
+            c = d - J.upper[k]
+        if c == 0.0:
+            return
+        ux = dx / d
+        uy = dy / d
+        cra = rax * uy - ray * ux
+        crb = rbx * uy - rby * ux
+        mass = _inv_or_zero(ma + mb + ia * cra * cra + ib * crb * crb)
+        lam = -mass * _clamp(c, MAX_LINEAR_CORRECTION)
+        _move(
+            position, angle, inv_mass, inv_inertia, a, b, lam * ux, lam * uy, lam * cra, lam * crb
+        )
+    else:  # PRISMATIC
+        rax, ray, rbx, rby, dx, dy = _separation(J, k, a, b, position, angle)
+        s, co = sin_cos(angle[a])
+        ux = co * J.axis[k, 0] - s * J.axis[k, 1]
+        uy = s * J.axis[k, 0] + co * J.axis[k, 1]
+        px = -uy
+        py = ux
+        s1 = (dx + rax) * py - (dy + ray) * px
+        s2 = rbx * py - rby * px
+        c1 = _clamp(px * dx + py * dy, MAX_LINEAR_CORRECTION)
+        c2 = _clamp(_wrap(angle[b] - angle[a] - J.reference_angle[k]), MAX_ANGULAR_CORRECTION)
+        k22 = ia + ib
+        if k22 == 0.0:
+            k22 = 1.0
+        k11, k12, k22 = _inverse_2x2(ma + mb + ia * s1 * s1 + ib * s2 * s2, ia * s1 + ib * s2, k22)
+        i1 = -(k11 * c1 + k12 * c2)
+        i2 = -(k12 * c1 + k22 * c2)
+        _move(
+            position, angle, inv_mass, inv_inertia, a, b, i1 * px, i1 * py,
+            i1 * s1 + i2, i1 * s2 + i2,
+        )  # fmt: skip
+        if J.has_limit[k]:
+            rax, ray, rbx, rby, dx, dy = _separation(J, k, a, b, position, angle)
+            translation = ux * dx + uy * dy
+            c = 0.0
+            if translation < J.lower[k]:
+                c = translation - J.lower[k]
+            elif translation > J.upper[k]:
+                c = translation - J.upper[k]
+            if c != 0.0:
+                a1 = (dx + rax) * uy - (dy + ray) * ux
+                a2 = rbx * uy - rby * ux
+                mass = _inv_or_zero(ma + mb + ia * a1 * a1 + ib * a2 * a2)
+                lam = -mass * _clamp(c, MAX_LINEAR_CORRECTION)
+                _move(
+                    position, angle, inv_mass, inv_inertia, a, b, lam * ux, lam * uy,
+                    lam * a1, lam * a2,
+                )  # fmt: skip
+
+
+@numba.njit(cache=True, nogil=True)
+def _error(J, k, a, b, position, angle):
+    rax, ray, rbx, rby, dx, dy = _separation(J, k, a, b, position, angle)
+    kind = J.kind[k]
+    q = _wrap(angle[b] - angle[a] - J.reference_angle[k])
+    if kind == REVOLUTE:
+        return np.sqrt(dx * dx + dy * dy), 0.0
+    if kind == WELD:
+        return np.sqrt(dx * dx + dy * dy), 0.0 if J.spring[k] else q
+    if kind == DISTANCE:
+        d = np.sqrt(dx * dx + dy * dy)
+        if J.rigid[k]:
+            return abs(d - J.length[k]), 0.0
+        if d < J.lower[k]:
+            return J.lower[k] - d, 0.0
+        if d > J.upper[k]:
+            return d - J.upper[k], 0.0
+        return 0.0, 0.0
+    s, c = sin_cos(angle[a])
+    ux = c * J.axis[k, 0] - s * J.axis[k, 1]
+    uy = s * J.axis[k, 0] + c * J.axis[k, 1]
+    return abs(-uy * dx + ux * dy), q
+
+
+@numba.njit(cache=True, nogil=True)
+def keep_joint_impulses(jt, carry):
+    """The accumulated impulses (J0 .. JU) into carry (m, JOINT_IMPULSES), for the next
+    sub-step's warm start (zeros for an inactive joint)."""
+    for k in range(jt.shape[0]):
+        for c in range(JOINT_IMPULSES):
+            carry[k, c] = jt[k, J0 + c]
+
+
+@numba.njit(cache=True, nogil=True)
+def write_joint_rows(
+    J, jt, position, angle, exists, error, anchor_a, anchor_b, linear, angular, motor, limit,
+    impulses, error_out,
+):  # fmt: skip
+    """One step's `isaac.engine.records.JointRows` fields (m, ...) from the last sub-step's
+    scratch (impulses, axes) and the final poses (anchors), `error` from the position pass."""
+    for k in range(J.kind.shape[0]):
+        t = jt[k]
+        for c in range(JOINT_IMPULSES):
+            impulses[k, c] = t[J0 + c]
+        error_out[k, 0] = error[k, 0]
+        error_out[k, 1] = error[k, 1]
+        a = J.a[k]
+        b = J.b[k]
+        for c in range(2):
+            anchor_a[k, c] = 0.0
+            anchor_b[k, c] = 0.0
+            linear[k, c] = 0.0
+        angular[k] = 0.0
+        motor[k] = t[JM]
+        limit[k] = t[JL] - t[JU]
+        if t[ON] == 0.0 or not (exists[a] and exists[b]):
+            continue
+        rax, ray = _arm(J.local_a, k, angle[a])
+        rbx, rby = _arm(J.local_b, k, angle[b])
+        anchor_a[k, 0] = position[a, 0] + rax
+        anchor_a[k, 1] = position[a, 1] + ray
+        anchor_b[k, 0] = position[b, 0] + rbx
+        anchor_b[k, 1] = position[b, 1] + rby
+        kind = J.kind[k]
+        if kind == REVOLUTE or kind == WELD:
+            linear[k, 0] = t[J0]
+            linear[k, 1] = t[J1]
+            angular[k] = t[J2]
+        elif kind == DISTANCE:
+            linear[k, 0] = t[J2] * t[UX]
+            linear[k, 1] = t[J2] * t[UY]
+        else:
+            linear[k, 0] = t[J0] * t[PX]
+            linear[k, 1] = t[J0] * t[PY]
+            angular[k] = t[J1]
