@@ -19,6 +19,7 @@ import numpy as np
 from google.protobuf import descriptor_pb2, timestamp_pb2
 
 from recorder import schema as S
+from recorder.shapes import drawn_shapes
 
 TOPIC = "/foxglove/scene"
 SCHEMA_NAME = "foxglove.SceneUpdate"
@@ -152,8 +153,7 @@ class SceneEncoder:
     """
 
     def __init__(self, model, *, impulse_scale: float, normal_length: float) -> None:
-        counts = np.asarray(model.vertex_count, dtype=np.int64)
-        local = np.asarray(model.vertices_local, dtype=np.float64)
+        local, counts = drawn_shapes(model)  # circles as a ring with a spoke
         body, start = [], []
         for k, c in enumerate(counts):
             body.extend([k] * int(c))

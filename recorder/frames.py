@@ -16,6 +16,7 @@ from typing import NamedTuple
 import numpy as np
 
 from isaac.engine.records import CONTACT_FIELDS, StepRecord
+from recorder.shapes import circle_radii
 
 STAT_KEYS = (
     "kinetic_energy",
@@ -313,6 +314,7 @@ def model_table(model) -> dict:
                 "concrete",
             )
         },
+        "circle_radius": circle_radii(model),
     }
 
 

@@ -34,6 +34,7 @@ from mcap.writer import CompressionType, Writer
 from isaac.engine.records import StepRecord, state_hash
 from isaac.errors import LogError
 from recorder import schema as S
+from recorder.shapes import circle_radii
 
 PROFILE = "isaac"
 LIBRARY = "isaac-recorder"
@@ -142,8 +143,11 @@ def encode_world(model, step: int, time: float, exists: np.ndarray) -> bytes:
     """``isaac.log.World``: every body's constant data and whether it exists at ``step``."""
     parts = [S.enc_uint(1, step), S.enc_double(2, time)]
     counts = np.asarray(model.vertex_count)
+    radii = circle_radii(model)
     for k, name in enumerate(model.names):
         c = int(counts[k])
+        # a circle's radius only for a circle: a polygon's body bytes are what they were
+        circle = (S.enc_double(10, float(radii[k])),) if radii[k] > 0.0 else ()
         body = b"".join(
             (
                 S.enc_uint(1, k),
@@ -155,6 +159,7 @@ def encode_world(model, step: int, time: float, exists: np.ndarray) -> bytes:
                 S.enc_uint(7, bool(model.concrete[k])),
                 S.enc_uint(8, bool(exists[k])),
                 S.enc_double(9, float(model.friction[k])),
+                *circle,
             )
         )
         parts.append(S.enc_bytes(3, body))

@@ -77,7 +77,8 @@ class WorldTable:
     step: the step from which this table holds.
     names: list of body names; vertices_local: (n, V, 2) m, body frame about the centre of mass,
     padded with zeros past ``vertex_count``; mass (kg), inertia (kg m^2), restitution, friction:
-    (n,) float64; concrete, exists: (n,) bool.
+    (n,) float64; concrete, exists: (n,) bool; circle_radius: (n,) m, a circle's radius (its
+    one vertex is its centre), 0 for a polygon.
     """
 
     step: int
@@ -90,6 +91,7 @@ class WorldTable:
     friction: np.ndarray
     concrete: np.ndarray
     exists: np.ndarray
+    circle_radius: np.ndarray
 
     @staticmethod
     def from_message(msg: dict) -> WorldTable:
@@ -100,9 +102,16 @@ class WorldTable:
         n = len(bodies)
         if [b["index"] for b in bodies] != list(range(n)):
             raise ValueError(f"/world: the body indices are not 0..{n - 1}")
-        for b in bodies:
+        radius = np.array([float(b.get("circle_radius", 0.0)) for b in bodies])
+        for b, r in zip(bodies, radius):
             size = b["vertices_local"].size
-            if size % 2 or not 3 <= size // 2 <= MAX_VERTICES:
+            if r > 0.0:
+                if size != 2:
+                    raise ValueError(
+                        f"/world: body {b['index']} is a circle with {size} vertex coordinates "
+                        "(a circle has one vertex, its centre)"
+                    )
+            elif size % 2 or not 3 <= size // 2 <= MAX_VERTICES:
                 raise ValueError(
                     f"/world: body {b['index']} has {size} vertex coordinates "
                     f"(a polygon has 3 to {MAX_VERTICES} x, y pairs)"
@@ -123,6 +132,7 @@ class WorldTable:
             friction=np.array([b["friction"] for b in bodies], dtype=np.float64),
             concrete=np.array([b["concrete"] for b in bodies], dtype=bool),
             exists=np.array([b["exists"] for b in bodies], dtype=bool),
+            circle_radius=radius,
         )
 
 

@@ -31,6 +31,7 @@ import rerun as rr
 from isaac.engine.records import StepRecord
 from isaac.errors import LogError
 from recorder import blueprint
+from recorder.shapes import drawn_shapes
 
 APP_ID = "isaac"
 STAT_NAMES = (
@@ -57,7 +58,7 @@ def default_scales(model) -> tuple[float, float]:
     impulse arrow L long changes a median body's speed by 1 m/s; normals are drawn L / 2 long.
     Push arrows: `PUSH_SCALE`.
     """
-    local = np.asarray(model.vertices_local, dtype=np.float64)
+    local, _ = drawn_shapes(model)  # a circle's size is its radius
     if local.size == 0:
         return 1.0, 0.5
     size = np.sqrt(np.max(np.sum(local * local, axis=2), axis=1))
@@ -208,8 +209,7 @@ class RerunLogWriter:
         self.model = model
         self.names = [str(x) for x in model.names]
         self.batch = batch
-        counts = np.asarray(model.vertex_count, dtype=np.int64)
-        local = np.asarray(model.vertices_local, dtype=np.float64)
+        local, counts = drawn_shapes(model)  # circles as a ring with a spoke
         self.vertices_local = np.ascontiguousarray(local, dtype=np.float64)
         self.vertex_count = np.ascontiguousarray(counts, dtype=np.int64)
         self.concrete = np.asarray(model.concrete, dtype=bool)

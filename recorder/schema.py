@@ -52,6 +52,8 @@ MESSAGES: dict[str, list[tuple[str, int, str, bool]]] = {
         ("concrete", 7, "bool", False),  # immovable (infinite mass and inertia)
         ("exists", 8, "bool", False),  # whether it is in the scene at this step
         ("friction", 9, "double", False),  # Coulomb coefficient
+        # a circle's radius (m; its vertices_local is its centre, one vertex); absent: a polygon
+        ("circle_radius", 10, "double", False),
     ],
     "World": [
         ("step", 1, "uint64", False),
