@@ -2,7 +2,12 @@
 
 MCAP frames (`pack`, `pack_into`, read back by `Frame`): a head with step, time, body and contact
 counts and the /stats values, then the encoded `/bodies` and `/contacts` messages, which the mcap
-library takes as they are. Rerun frames (`recorder.pack.pack_rerun`, read back by
+library takes as they are; in a scene with joints, then a trailer (`joints_trailer`): the
+`/joints` message's byte count (uint64) and the message, encoded by
+`recorder.mcap_writer.encode_joints` (Python, not the compiled packer), padded to 8 bytes. A
+frame without joints has no trailer, so its bytes are what they were before joints.
+
+Rerun frames (`recorder.pack.pack_rerun`, read back by
 `read_rerun_frame`): only what the recording draws, as raw native-endian arrays. The transport
 that carries them (shared-memory ring, command pipe) is `recorder.writer_process`.
 """
@@ -132,6 +137,28 @@ def read_rerun_frame(buf: np.ndarray, at: int = 0) -> RerunFrame:
     )
 
 
+_TRAILER_LEN = struct.Struct("<Q")
+
+
+def joints_trailer(step: int, time: float, joints) -> bytes:
+    """A frame's trailer holding the `/joints` message of ``joints`` (`JointRows`), or b""
+    for None (a scene without joints)."""
+    if joints is None:
+        return b""
+    from recorder.mcap_writer import encode_joints
+
+    message = encode_joints(step, time, joints)
+    return b"".join(
+        (_TRAILER_LEN.pack(len(message)), message, bytes(_pad8(len(message)) - len(message)))
+    )
+
+
+def put_trailer(buf: np.ndarray, pos: int, trailer: bytes) -> None:
+    """Copy a trailer to byte ``pos`` of ``buf`` (uint8): right after the frame's messages."""
+    if trailer:
+        buf[pos : pos + len(trailer)] = np.frombuffer(trailer, dtype=np.uint8)
+
+
 def pack(record: StepRecord, stats: dict) -> bytes:
     """`record` and its `stats` as one frame, encoded by the reference encoders
     (`recorder.mcap_writer`); the compiled `recorder.pack` writes the same bytes."""
@@ -148,7 +175,10 @@ def pack(record: StepRecord, stats: dict) -> bytes:
         len(contacts),
     )
     pad = bytes(_pad8(len(bodies)) - len(bodies))
-    return b"".join((head, bodies, pad, contacts, bytes(_pad8(len(contacts)) - len(contacts))))
+    trailer = joints_trailer(int(record.step), float(record.time), record.joints)
+    return b"".join(
+        (head, bodies, pad, contacts, bytes(_pad8(len(contacts)) - len(contacts)), trailer)
+    )
 
 
 def pack_into(
@@ -241,6 +271,13 @@ class Frame:
         self.bodies = view[FRAME_HEAD.size : FRAME_HEAD.size + bodies_len]
         at = FRAME_HEAD.size + _pad8(bodies_len)
         self.contacts = view[at : at + contacts_len]
+        at += _pad8(contacts_len)
+        # the /joints message (bytes), None in a frame without the trailer
+        self.joints = None
+        if len(view) >= at + _TRAILER_LEN.size:
+            (joints_len,) = _TRAILER_LEN.unpack_from(view, at)
+            at += _TRAILER_LEN.size
+            self.joints = view[at : at + joints_len]
         self._fields: list[memoryview] | None = None
 
     def body_fields(self) -> list[memoryview]:
@@ -269,7 +306,10 @@ class Frame:
 
         # one copy each: the ring slot is reused
         bodies = S.decode("Bodies", bytes(self.bodies))
-        return record_from_messages(bodies, S.decode("Contacts", bytes(self.contacts)))
+        joints = None if self.joints is None else S.decode("Joints", bytes(self.joints))
+        return record_from_messages(
+            bodies, S.decode("Contacts", bytes(self.contacts)), joints=joints
+        )
 
 
 def _field_spans(buf, count: int) -> list[tuple[int, int]]:
@@ -352,17 +392,35 @@ def write_batch_to(writer, batch, model, gravity) -> int:
     `pack_batch`, the writer processes' encoder, then written as a writer process writes them.
     Returns how many steps were written: all, or those before the first one holding a NaN or
     an infinity."""
-    sizes = batch_frame_sizes(batch)
+    sizes, trailers = batch_frame_sizes_with_joints(batch)
     buf = np.empty(int(sizes[:, 2].sum()), dtype=np.uint8)
     done = pack_batch(buf, 0, 0, batch.steps, batch, sizes, model, gravity)
     at = 0
     with memoryview(buf) as view:
         for s in range(done):
             size = int(sizes[s, 2])
+            put_trailer(buf, at + size - len(trailers[s]), trailers[s])
             frame = Frame(view[at : at + size])
             writer.write_messages(
                 frame.step, frame.time, frame.exists(), frame.bodies, frame.contacts,
-                {**frame.stats, "state_hash": frame.state_hash()},
+                {**frame.stats, "state_hash": frame.state_hash()}, frame.joints,
             )  # fmt: skip
             at += size
     return done
+
+
+def batch_frame_sizes_with_joints(batch) -> tuple[np.ndarray, list[bytes]]:
+    """`batch_frame_sizes` with each frame's joints trailer counted in its frame bytes, and
+    the trailers (`joints_trailer`; all b"" for a scene without joints). The compiled packer
+    lays the frames out by these sizes, leaving each trailer's room free; the caller copies
+    the trailers in (`put_trailer`, at the frame's end less the trailer's length)."""
+    sizes = batch_frame_sizes(batch)
+    if batch.joints_of(0) is None:
+        return sizes, [b""] * batch.steps
+    trailers = [
+        joints_trailer(batch.first + s, (batch.first + s) * batch.dt, batch.joints_of(s))
+        for s in range(batch.steps)
+    ]
+    sizes = sizes.copy()
+    sizes[:, 2] += np.array([len(t) for t in trailers], dtype=sizes.dtype)
+    return sizes, trailers

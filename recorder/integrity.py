@@ -28,7 +28,9 @@ from recorder.mcap_records import McapScan, RecordError, open_log
 from recorder.mcap_writer import META_END
 
 STEP_TOPICS = ("/bodies", "/contacts", "/stats")
-TOPICS = ("/world",) + STEP_TOPICS
+# /joints (a scene with joints only) is read with the step; written before /stats, it is there
+# whenever /stats is
+TOPICS = ("/world",) + STEP_TOPICS + ("/joints",)
 
 # the RecordError of a file that stops at a record boundary: what a crash leaves at the end of
 # a .partial log, not damage (a file cut inside a record is: part of a record is lost)

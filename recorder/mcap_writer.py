@@ -4,9 +4,9 @@ Layout (the public contract is docs/log-format.md):
 - metadata ``isaac`` and attachment ``scene.yaml`` right after the header, before any chunk, so a
   crashed file still carries everything needed to re-simulate;
 - channels ``/world``, ``/bodies``, ``/contacts``, ``/stats`` (protobuf, schema =
-  FileDescriptorSet); one message per step on each (``/world`` only at step 0 and when a body
-  enters or leaves), with ``log_time = publish_time = round(step * dt * 1e9)`` ns and ``sequence =
-step``;
+  FileDescriptorSet), and ``/joints`` in a scene with joints; one message per step on each
+  (``/world`` only at step 0 and when a body enters or leaves), with
+  ``log_time = publish_time = round(step * dt * 1e9)`` ns and ``sequence = step``;
 - chunks are closed (and the file flushed to the OS) after step 0 and every ``flush_every`` steps
   (<= 100), at a step boundary; they also close whenever they pass ``chunk_size`` (256 KiB:
   measured fastest with the mcap library, whose chunk buffer slows down when it grows larger),
@@ -139,8 +139,105 @@ def build_metadata(scene, scene_text: str, n_bodies: int) -> dict[str, str]:
     return meta
 
 
-def encode_world(model, step: int, time: float, exists: np.ndarray) -> bytes:
-    """``isaac.log.World``: every body's constant data and whether it exists at ``step``."""
+def joint_table_rows(joints) -> tuple[dict, ...]:
+    """The joint table as plain dicts (what ``World.joints`` stores, picklable for a writer
+    process), from `isaac.scene.JointSpec`s or such dicts; ``()`` for none. A limit that is not
+    given is -inf (lower) or +inf (upper); a spring's stiffness and a motor's speed not given
+    are 0 with ``spring`` / ``motor`` false."""
+    if not joints:
+        return ()
+    rows = []
+    for j in joints:
+        if isinstance(j, dict):  # already a row
+            rows.append(dict(j))
+            continue
+        get = lambda k, j=j: getattr(j, k)  # noqa: E731
+
+        def opt(key, none, j=j):
+            v = getattr(j, key)
+            return none if v is None else float(v)
+
+        rows.append(
+            {
+                "name": str(get("name")),
+                "type": str(get("kind")),
+                "a": int(get("a")),
+                "b": int(get("b")),
+                "local_a": tuple(float(x) for x in get("local_a")),
+                "local_b": tuple(float(x) for x in get("local_b")),
+                "axis": tuple(float(x) for x in get("axis")),
+                "reference_angle": float(get("reference_angle")),
+                "length": float(get("length")),
+                "min_length": opt("min_length", -np.inf),
+                "max_length": opt("max_length", np.inf),
+                "stiffness": opt("stiffness", 0.0),
+                "damping_ratio": float(get("damping_ratio")),
+                "lower": opt("lower", -np.inf),
+                "upper": opt("upper", np.inf),
+                "motor_speed": opt("motor_speed", 0.0),
+                "max_motor": float(get("max_motor")),
+                "spring": get("stiffness") is not None,
+                "motor": get("motor_speed") is not None,
+                "collide_connected": bool(get("collide_connected")),
+            }
+        )
+    return tuple(rows)
+
+
+def encode_joint(index: int, row: dict) -> bytes:
+    """``isaac.log.Joint``: one row of `joint_table_rows`."""
+    d = S.enc_double
+    return b"".join(
+        (
+            S.enc_uint(1, index),
+            S.enc_string(2, row["name"]),
+            S.enc_string(3, row["type"]),
+            S.enc_uint(4, row["a"]),
+            S.enc_uint(5, row["b"]),
+            S.enc_doubles(6, np.array(row["local_a"], dtype=np.float64)),
+            S.enc_doubles(7, np.array(row["local_b"], dtype=np.float64)),
+            S.enc_doubles(8, np.array(row["axis"], dtype=np.float64)),
+            d(9, row["reference_angle"]),
+            d(10, row["length"]),
+            d(11, row["min_length"]),
+            d(12, row["max_length"]),
+            d(13, row["stiffness"]),
+            d(14, row["damping_ratio"]),
+            d(15, row["lower"]),
+            d(16, row["upper"]),
+            d(17, row["motor_speed"]),
+            d(18, row["max_motor"]),
+            S.enc_uint(19, bool(row["spring"])),
+            S.enc_uint(20, bool(row["motor"])),
+            S.enc_uint(21, bool(row["collide_connected"])),
+        )
+    )
+
+
+# (number, JointRows field) of ``isaac.log.Joints``, each a packed repeated double
+JOINT_WIRE = (
+    (3, "anchor_a"),
+    (4, "anchor_b"),
+    (5, "linear_impulse"),
+    (6, "angular_impulse"),
+    (7, "motor_impulse"),
+    (8, "limit_impulse"),
+    (9, "error"),
+    (10, "impulses"),
+)
+
+
+def encode_joints(step: int, time: float, joints) -> bytes:
+    """``isaac.log.Joints``: the step's `isaac.engine.records.JointRows`, raw float64."""
+    parts = [S.enc_uint(1, step), S.enc_double(2, time)]
+    for number, name in JOINT_WIRE:
+        S.packed(parts, number, getattr(joints, name), "<f8")
+    return b"".join(parts)
+
+
+def encode_world(model, step: int, time: float, exists: np.ndarray, joints=()) -> bytes:
+    """``isaac.log.World``: every body's constant data and whether it exists at ``step``, and
+    the joint table (``joints``: `joint_table_rows`; field 4, left out when there is none)."""
     parts = [S.enc_uint(1, step), S.enc_double(2, time)]
     counts = np.asarray(model.vertex_count)
     radii = circle_radii(model)
@@ -163,6 +260,8 @@ def encode_world(model, step: int, time: float, exists: np.ndarray) -> bytes:
             )
         )
         parts.append(S.enc_bytes(3, body))
+    for i, row in enumerate(joints):
+        parts.append(S.enc_bytes(4, encode_joint(i, row)))
     return b"".join(parts)
 
 
@@ -330,6 +429,10 @@ class McapLogWriter:
     foxglove: a `recorder.foxglove.SceneEncoder` to also write ``/foxglove/scene``, or None.
     metadata: the ``isaac`` metadata record; default `build_metadata` of ``scene`` (a writer
         process gets it ready-made, with ``scene`` reduced to its name and ``world.dt``).
+    joints: the scene's joints (`isaac.scene.JointSpec`s or `joint_table_rows`); default
+        ``scene.joints`` when it has them. With joints, ``/world`` carries the joint table and
+        every step a ``/joints`` message (the schema then holds the joint messages); without,
+        the file is byte for byte what it was before joints existed.
     background: encode in the caller's thread, but hand the bytes to a writer thread for the MCAP
         bookkeeping, compression and file writes. Off by default: with the engine's kernels
         holding the GIL it measured slower (GIL hand-offs), not faster. The bytes of the file
@@ -349,6 +452,7 @@ class McapLogWriter:
         background: bool = False,
         foxglove=None,
         metadata: dict[str, str] | None = None,
+        joints=None,
     ) -> None:
         if not 1 <= flush_every <= 100:
             raise ValueError("flush_every must be in 1..100")
@@ -357,6 +461,9 @@ class McapLogWriter:
         self.path = str(path)
         self.partial_path = self.path + ".partial"
         self.model = model
+        if joints is None:
+            joints = getattr(scene, "joints", ())
+        self.joints = joint_table_rows(joints)
         self.flush_every = flush_every
         self.clock = LogClock(scene.world.dt)
         self.steps_written = 0
@@ -384,9 +491,12 @@ class McapLogWriter:
             media_type="application/yaml",
             data=scene_text.encode("utf-8"),
         )
-        fds = S.schema_bytes()
+        with_joints = bool(self.joints)
+        fds = S.schema_bytes(with_joints)
         self._channel = {}
         for topic, message in S.TOPICS.items():
+            if topic in S.JOINT_TOPICS and not with_joints:
+                continue
             schema_id = w.register_schema(
                 name=S.full_name(message), encoding=S.SCHEMA_ENCODING, data=fds
             )
@@ -430,17 +540,46 @@ class McapLogWriter:
             self._queue.put(item)
 
     def write_messages(
-        self, step: int, time: float, exists: np.ndarray, bodies, contacts, stats: dict
+        self,
+        step: int,
+        time: float,
+        exists: np.ndarray,
+        bodies,
+        contacts,
+        stats: dict,
+        joints=None,
     ) -> None:
-        """Append one step already encoded (``bodies``, ``contacts``: the bytes `encode_bodies`
-        and `encode_contacts` give; ``stats`` with its ``state_hash``), in this thread: what a
-        writer process does with the frames `recorder.pack` encodes."""
+        """Append one step already encoded (``bodies``, ``contacts``, ``joints``: the bytes
+        `encode_bodies`, `encode_contacts` and `encode_joints` give, ``joints`` None without
+        joints; ``stats`` with its ``state_hash``), in this thread: what a writer process does
+        with the frames `recorder.pack` encodes."""
         if self._queue is not None:
             raise LogError("write_messages is for a writer without a background thread")
         world_changed, flush = self._count(step, exists)
         self._add(
-            step, time, exists if world_changed else None, bodies, contacts, stats, None, flush
+            step,
+            time,
+            exists if world_changed else None,
+            bodies,
+            contacts,
+            stats,
+            None,
+            flush,
+            joints,
         )
+
+    def _joints_message(self, record: StepRecord) -> bytes | None:
+        """The record's ``/joints`` message, None without joints; LogError if a scene with
+        joints hands a record without them (its log would lose them)."""
+        if not self.joints:
+            return None
+        if record.joints is None or len(record.joints) != len(self.joints):
+            raise LogError(
+                f"step {record.step}: the record carries "
+                f"{0 if record.joints is None else len(record.joints)} joints; the scene has "
+                f"{len(self.joints)}"
+            )
+        return encode_joints(record.step, record.time, record.joints)
 
     @property
     def takes_batches(self) -> bool:
@@ -472,19 +611,27 @@ class McapLogWriter:
             stats,
             record,
             flush,
+            self._joints_message(record),
         )
 
-    def _add(self, step, time, world_exists, bodies, contacts, stats, record, flush) -> None:
+    def _add(
+        self, step, time, world_exists, bodies, contacts, stats, record, flush, joints=None
+    ) -> None:
         """The step's messages (``/world`` first, with ``world_exists``, when given;
         ``/foxglove/scene`` when enabled, from ``record``), then the chunk closed when
         ``flush``. Uses nothing a later `write` changes: the writer thread runs behind."""
+        if self.joints and joints is None:  # before any of the step's messages
+            raise LogError(f"step {step}: no /joints message for a scene with joints")
         ch = self._channel
         t = self.clock(step)
         add = self._writer.add_message
         if world_exists is not None:
-            add(ch["/world"], t, encode_world(self.model, step, time, world_exists), t, step)
+            world = encode_world(self.model, step, time, world_exists, self.joints)
+            add(ch["/world"], t, world, t, step)
         add(ch["/bodies"], t, bodies, t, step)
         add(ch["/contacts"], t, contacts, t, step)
+        if joints is not None:
+            add(ch["/joints"], t, joints, t, step)
         add(ch["/stats"], t, encode_stats(step, time, stats), t, step)
         if self.foxglove is not None:
             add(ch["/foxglove/scene"], t, self.foxglove.encode(record, t), t, step)

@@ -40,7 +40,7 @@ import numpy as np
 from mcap.records import Header, Metadata
 from mcap.writer import Writer
 
-from isaac.engine.records import Contacts, StepRecord
+from isaac.engine.records import JOINT_FIELDS, Contacts, JointRows, StepRecord
 from isaac.errors import LogError
 from isaac.scene.limits import MAX_VERTICES
 from recorder import schema as S
@@ -78,7 +78,8 @@ class WorldTable:
     names: list of body names; vertices_local: (n, V, 2) m, body frame about the centre of mass,
     padded with zeros past ``vertex_count``; mass (kg), inertia (kg m^2), restitution, friction:
     (n,) float64; concrete, exists: (n,) bool; circle_radius: (n,) m, a circle's radius (its
-    one vertex is its centre), 0 for a polygon.
+    one vertex is its centre), 0 for a polygon; joints: the joint table, one dict per joint in
+    index order with the fields of ``isaac.log.Joint`` (docs/log-format.md), empty without.
     """
 
     step: int
@@ -92,6 +93,7 @@ class WorldTable:
     concrete: np.ndarray
     exists: np.ndarray
     circle_radius: np.ndarray
+    joints: tuple = ()
 
     @staticmethod
     def from_message(msg: dict) -> WorldTable:
@@ -133,7 +135,35 @@ class WorldTable:
             concrete=np.array([b["concrete"] for b in bodies], dtype=bool),
             exists=np.array([b["exists"] for b in bodies], dtype=bool),
             circle_radius=radius,
+            joints=_joint_table(msg.get("joints", []), n),
         )
+
+
+def _joint_table(joints: list, n: int) -> tuple:
+    """The decoded ``World.joints`` as row dicts (2-vectors as tuples); ValueError (one line)
+    if the indices are not 0..m-1 or a joint names a body outside the n."""
+    rows = sorted(joints, key=lambda j: j["index"])
+    if [j["index"] for j in rows] != list(range(len(rows))):
+        raise ValueError(f"/world: the joint indices are not 0..{len(rows) - 1}")
+    out = []
+    for j in rows:
+        for key in ("a", "b"):
+            if not 0 <= j[key] < n:
+                raise ValueError(
+                    f"/world: joint {j['index']} ({j['name']}) names body {j[key]} as {key}; "
+                    f"the world has {n}"
+                )
+        for key in ("local_a", "local_b", "axis"):
+            if j[key].size != 2:
+                raise ValueError(
+                    f"/world: joint {j['index']} ({j['name']}): {key} has {j[key].size} values, "
+                    "not 2"
+                )
+        row = {k: v for k, v in j.items() if k != "index"}
+        for key in ("local_a", "local_b", "axis"):
+            row[key] = tuple(float(x) for x in j[key])
+        out.append(row)
+    return tuple(out)
 
 
 @dataclass(frozen=True, eq=False)
@@ -185,8 +215,27 @@ def check_bodies(msg: dict) -> int:
     return n
 
 
-def record_from_messages(bodies: dict, contacts: dict) -> StepRecord:
-    """A StepRecord from decoded `/bodies` and `/contacts` messages (arrays are read-only views).
+def joints_from_message(msg: dict, m: int | None = None) -> JointRows:
+    """`JointRows` from a decoded `/joints` message (read-only views): ValueError (one line)
+    unless every field holds the same number of joints (``m`` when given)."""
+    from isaac.engine.joints import JOINT_IMPULSES
+
+    if m is None:
+        m = msg["angular_impulse"].size
+    what = f"{m} joints"
+    widths = {"anchor_a": 2, "anchor_b": 2, "linear_impulse": 2, "error": 2}
+    widths["impulses"] = JOINT_IMPULSES
+    fields = {}
+    for name in JOINT_FIELDS:
+        w = widths.get(name, 1)
+        v = _sized(msg, "/joints", name, w * m, what)
+        fields[name] = v.reshape(m, w) if w > 1 else v
+    return JointRows(**fields)
+
+
+def record_from_messages(bodies: dict, contacts: dict, joints: dict | None = None) -> StepRecord:
+    """A StepRecord from decoded `/bodies`, `/contacts` and (a scene with joints) `/joints`
+    messages (arrays are read-only views).
 
     Raises ValueError (one line) if the arrays do not fit together: every per-body array must
     hold n values (2n for 2-vectors), every per-contact array m (2m), and a contact's bodies
@@ -201,6 +250,7 @@ def record_from_messages(bodies: dict, contacts: dict) -> StepRecord:
         angular_velocity=bodies["angular_velocity"],
         exists=bodies["exists"],
         contacts=contacts_from_message(contacts),
+        joints=None if joints is None else joints_from_message(joints),
     )
     c = record.contacts
     if len(c):
@@ -430,10 +480,21 @@ class LogReader:
                 bodies = S.decode("Bodies", bytes(messages["/bodies"]))
                 contacts = S.decode("Contacts", bytes(messages["/contacts"]))
                 stats = S.decode("Stats", bytes(messages["/stats"]))
+                joints = None
+                if world.joints:
+                    if "/joints" not in messages:
+                        raise ValueError("no /joints message (the world has joints)")
+                    joints = S.decode("Joints", bytes(messages["/joints"]))
+                    if joints["step"] != step:
+                        raise ValueError(f"/joints: the message says step {joints['step']}")
                 for topic, msg in (("/bodies", bodies), ("/contacts", contacts), ("/stats", stats)):
                     if msg["step"] != step:
                         raise ValueError(f"{topic}: the message says step {msg['step']}")
-                record = record_from_messages(bodies, contacts)
+                record = record_from_messages(bodies, contacts, joints)
+                if joints is not None and len(record.joints) != len(world.joints):
+                    raise ValueError(
+                        f"/joints holds {len(record.joints)} joints, /world {len(world.joints)}"
+                    )
                 if record.position.shape[0] != len(world.names):
                     raise ValueError(
                         f"/bodies holds {record.position.shape[0]} bodies, /world "

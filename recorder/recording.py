@@ -167,7 +167,7 @@ class Recorder:
         return None if c is None else c.fd
 
     def _mcap_writer(self, path, offload, compression, flush_every, foxglove, impulse_scale):
-        from recorder.mcap_writer import McapLogWriter, build_metadata
+        from recorder.mcap_writer import McapLogWriter, build_metadata, joint_table_rows
 
         fox = None
         if foxglove:
@@ -196,6 +196,7 @@ class Recorder:
                     "flush_every": flush_every,
                     "compression": compression,
                     "foxglove": fox,
+                    "joints": joint_table_rows(getattr(self.scene, "joints", ())),
                 },
             )
         scene_encoder = None

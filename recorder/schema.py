@@ -107,6 +107,48 @@ MESSAGES: dict[str, list[tuple[str, int, str, bool]]] = {
     ],
 }
 
+# The joint messages (a scene with joints only): ``World.joints`` (field 4) holds the joint
+# table and ``/joints`` a step's joint rows. A scene without joints stores the schema above
+# alone, so its log keeps the bytes it had before joints existed.
+WORLD_JOINTS_FIELD = ("joints", 4, "message:Joint", True)  # in joint-index order
+JOINT_MESSAGES: dict[str, list[tuple[str, int, str, bool]]] = {
+    "Joint": [
+        ("index", 1, "uint32", False),
+        ("name", 2, "string", False),
+        ("type", 3, "string", False),  # revolute, distance, weld or prismatic
+        ("a", 4, "uint32", False),  # body index
+        ("b", 5, "uint32", False),  # body index
+        ("local_a", 6, "double", True),  # (2,) m, a's frame (about a's centre of mass)
+        ("local_b", 7, "double", True),  # (2,) m, b's frame
+        ("axis", 8, "double", True),  # (2,) unit, a's frame (prismatic; (1, 0) otherwise)
+        ("reference_angle", 9, "double", False),  # rad, angle of b less angle of a at rest
+        ("length", 10, "double", False),  # m (distance: rest length)
+        ("min_length", 11, "double", False),  # m (distance; -inf: none)
+        ("max_length", 12, "double", False),  # m (distance; +inf: none)
+        ("stiffness", 13, "double", False),  # Hz (0 when spring is false)
+        ("damping_ratio", 14, "double", False),
+        ("lower", 15, "double", False),  # rad or m (revolute, prismatic; -inf: none)
+        ("upper", 16, "double", False),  # rad or m (+inf: none)
+        ("motor_speed", 17, "double", False),  # rad/s or m/s (0 when motor is false)
+        ("max_motor", 18, "double", False),  # N m or N
+        ("spring", 19, "bool", False),  # stiffness given (distance, weld)
+        ("motor", 20, "bool", False),  # motor_speed given (revolute, prismatic)
+        ("collide_connected", 21, "bool", False),
+    ],
+    "Joints": [
+        ("step", 1, "uint64", False),
+        ("time", 2, "double", False),  # s
+        ("anchor_a", 3, "double", True),  # (m, 2) m, world
+        ("anchor_b", 4, "double", True),  # (m, 2) m, world
+        ("linear_impulse", 5, "double", True),  # (m, 2) N s, world, on b
+        ("angular_impulse", 6, "double", True),  # (m,) N m s, on b
+        ("motor_impulse", 7, "double", True),  # (m,) N m s or N s, on b
+        ("limit_impulse", 8, "double", True),  # (m,) lower less upper, on b
+        ("error", 9, "double", True),  # (m, 2) m and rad left after the position correction
+        ("impulses", 10, "double", True),  # (m, 6) the solver's accumulated impulses J0 .. JU
+    ],
+}
+
 # Format 1's Contacts (one row per contact point, every field per row), read from older logs
 # only: never written, and not in the schema stored in new logs.
 LEGACY_MESSAGES = {
@@ -131,8 +173,15 @@ LEGACY_MESSAGES = {
 # the field numbers only format 1 uses (a format 1 message holding a contact has some of them)
 CONTACTS_V1_ONLY = frozenset((3, 4, 5, 6, 7, 9, 11, 12))
 
-# topic -> message name (without package)
-TOPICS = {"/world": "World", "/bodies": "Bodies", "/contacts": "Contacts", "/stats": "Stats"}
+# topic -> message name (without package); /joints only in a scene with joints
+TOPICS = {
+    "/world": "World",
+    "/bodies": "Bodies",
+    "/contacts": "Contacts",
+    "/joints": "Joints",
+    "/stats": "Stats",
+}
+JOINT_TOPICS = frozenset(("/joints",))
 
 
 def full_name(message: str) -> str:
@@ -140,10 +189,19 @@ def full_name(message: str) -> str:
     return f"{PACKAGE}.{message}"
 
 
-def file_descriptor_set() -> descriptor_pb2.FileDescriptorSet:
-    """The FileDescriptorSet holding every ISAAC log message (one .proto file, proto3)."""
+def _messages(joints: bool) -> dict[str, list[tuple[str, int, str, bool]]]:
+    if not joints:
+        return MESSAGES
+    out = {**MESSAGES, **JOINT_MESSAGES}
+    out["World"] = [*MESSAGES["World"], WORLD_JOINTS_FIELD]
+    return out
+
+
+def file_descriptor_set(joints: bool = False) -> descriptor_pb2.FileDescriptorSet:
+    """The FileDescriptorSet holding every ISAAC log message (one .proto file, proto3); with
+    ``joints``, also ``Joint``, ``Joints`` and ``World.joints`` (a scene with joints)."""
     fdp = descriptor_pb2.FileDescriptorProto(name=FILE_NAME, package=PACKAGE, syntax="proto3")
-    for message, fields in MESSAGES.items():
+    for message, fields in _messages(joints).items():
         mdp = fdp.message_type.add(name=message)
         for name, number, typ, repeated in fields:
             f = mdp.field.add(name=name, number=number, json_name=_json_name(name))
@@ -158,9 +216,10 @@ def file_descriptor_set() -> descriptor_pb2.FileDescriptorSet:
     return fds
 
 
-def schema_bytes() -> bytes:
-    """The serialized FileDescriptorSet (deterministic bytes) stored as every channel's schema."""
-    return file_descriptor_set().SerializeToString(deterministic=True)
+def schema_bytes(joints: bool = False) -> bytes:
+    """The serialized FileDescriptorSet (deterministic bytes) stored as every channel's schema
+    (``joints``: the one of a scene with joints)."""
+    return file_descriptor_set(joints).SerializeToString(deterministic=True)
 
 
 def _json_name(name: str) -> str:
@@ -283,11 +342,19 @@ def _read_varint(buf: bytes, pos: int) -> tuple[int, int]:
             raise WireError("varint too long")
 
 
+_SPECS = {**_messages(True), **LEGACY_MESSAGES}
+
+
+def spec(message: str) -> list[tuple[str, int, str, bool]]:
+    """(name, number, type, repeated) of every field of ``isaac.log.<message>`` (the joint
+    messages and ``World.joints`` included)."""
+    return _SPECS[message]
+
+
 _FIELDS_BY_NUMBER = {
     message: {number: (name, typ, repeated) for name, number, typ, repeated in fields}
-    for message, fields in {**MESSAGES, **LEGACY_MESSAGES}.items()
+    for message, fields in _SPECS.items()
 }
-_SPECS = {**MESSAGES, **LEGACY_MESSAGES}
 
 
 def contacts_format(buf: bytes) -> int:

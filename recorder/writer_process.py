@@ -61,12 +61,14 @@ from isaac.errors import LogError
 from recorder.frames import (
     FRAME_HEAD,
     Frame,
-    batch_frame_sizes,
+    batch_frame_sizes_with_joints,
     frame_sizes,
+    joints_trailer,
     pack,
     pack_batch,
     pack_into,
     put_stats,
+    put_trailer,
     read_rerun_frame,
 )
 
@@ -307,12 +309,14 @@ class WriterProcess:
         if self.kind == "rerun":
             return self._write_rerun(record, stats)
         bodies_size, contacts_size, size = frame_sizes(record)
-        if size > self.capacity or not self._compiled:
+        trailer = joints_trailer(int(record.step), float(record.time), record.joints)
+        if size + len(trailer) > self.capacity or not self._compiled:
             return self._write_inline(record, stats)
-        pos, end = self._reserve(size)
+        pos, end = self._reserve(size + len(trailer))
         if not self._compiled_pack(pos, record, stats, bodies_size, contacts_size):
             return False
-        self._announce(pos, size, end)
+        put_trailer(self._ring_u8, pos + size, trailer)
+        self._announce(pos, size + len(trailer), end)
         return True
 
     takes_batches = True  # `write_batch`
@@ -327,7 +331,7 @@ class WriterProcess:
                 if not self.write(batch.record(s)):
                     return s
             return batch.steps
-        sizes = batch_frame_sizes(batch)
+        sizes, trailers = batch_frame_sizes_with_joints(batch)
         ends = np.cumsum(sizes[:, 2])
         lo = 0
         while lo < batch.steps:
@@ -350,6 +354,7 @@ class WriterProcess:
             at, head = pos, end - total
             for s in range(lo, done):
                 size = int(sizes[s, 2])
+                put_trailer(self._ring_u8, at + size - len(trailers[s]), trailers[s])
                 head += size
                 self._announce(at, size, head)
                 at += size
@@ -644,6 +649,7 @@ class _FrameWriter:
                 frame.bodies,
                 frame.contacts,
                 {**frame.stats, "state_hash": frame.state_hash()},
+                frame.joints,
             )
         else:
             self.writer.write(frame.record(), frame.stats)
@@ -677,6 +683,7 @@ def _make_bare_writer(config: dict):
             compression=config["compression"],
             foxglove=scene_encoder,
             metadata=config["metadata"],
+            joints=config.get("joints", ()),
         )
     from recorder.rerun_writer import RerunLogWriter
 

@@ -41,8 +41,10 @@ from recorder.mcap_writer import (
     encode_bodies,
     encode_contacts,
     encode_contacts_v1,
+    encode_joints,
     encode_stats,
     encode_world,
+    joint_table_rows,
 )
 from recorder.reader import DECODE_ERRORS, record_from_messages
 from recorder.stats import compute_stats
@@ -85,7 +87,7 @@ def physics_note(logged: dict, here: dict, *, what: str = "here") -> str | None:
     return f"physics version {a} in the log, {b} {what} (CHANGELOG.md lists what changed)"
 
 
-_CHANNEL_ORDER = ("/world", "/contacts", "/bodies", "/stats")
+_CHANNEL_ORDER = ("/world", "/contacts", "/bodies", "/joints", "/stats")
 
 
 def versions_note(
@@ -217,7 +219,10 @@ def _logged_record(raw: RawStep, path: str, n_bodies: int) -> StepRecord:
     try:
         bodies = S.decode("Bodies", raw.messages["/bodies"])
         contacts = S.decode("Contacts", raw.messages["/contacts"])
-        record = record_from_messages(bodies, contacts)
+        # the logged joints carry the warm-start impulses the engine goes on from
+        joints = raw.messages.get("/joints")
+        joints = None if joints is None else S.decode("Joints", joints)
+        record = record_from_messages(bodies, contacts, joints)
     except DECODE_ERRORS as exc:
         raise LogError(
             f"{path}: damaged log: step {raw.step}: the logged state does not decode ({exc})"
@@ -240,6 +245,7 @@ def _compare_step(
     path: str,
     paths: tuple[str, str] | None = None,
     sides: tuple[str, str] = ("logged", "replayed"),
+    joint_names: list | None = None,
 ) -> tuple[bool, bool]:
     """Compare one step's payloads. Returns (bytes all equal, beyond tolerance somewhere).
 
@@ -273,7 +279,9 @@ def _compare_step(
             continue
         equal = False
         try:
-            d, max_ulps = locate(topic, raw.step, theirs, mine, names, tolerance)
+            d, max_ulps = locate(
+                topic, raw.step, theirs, mine, names, tolerance, joint_names=joint_names
+            )
         except MalformedMessage as exc:
             where = paths[exc.side] if paths else path
             raise LogError(
@@ -322,6 +330,8 @@ class StepEncoder:
         out = self._encode(record)
         if self._v1:
             out["/contacts"] = encode_contacts_v1(record)
+        if record.joints is not None:
+            out["/joints"] = encode_joints(record.step, record.time, record.joints)
         return out
 
     def _encode(self, record: StepRecord) -> dict[str, bytes]:
@@ -400,6 +410,8 @@ def replay_log(
     names = list(model.names)
     gravity = tuple(float(g) for g in scene.world.gravity)
     encoder = StepEncoder(model, gravity, log.format_version)
+    joint_rows = joint_table_rows(scene.joints)
+    joint_names = [j.name for j in scene.joints]
     report = Report(mode="replay", logs=[str(path)], tolerance=tolerance, max_reported=max_reported)
     report.notes.extend(notes)
     here = build_metadata(scene, "", len(names))
@@ -471,10 +483,14 @@ def replay_log(
                 continue
             ours = encoder.encode(record)
             if last_exists is None or not np.array_equal(record.exists, last_exists):
-                ours["/world"] = encode_world(model, record.step, record.time, record.exists)
+                ours["/world"] = encode_world(
+                    model, record.step, record.time, record.exists, joint_rows
+                )
                 last_exists = record.exists.copy()
             report.steps_compared += 1
-            equal, beyond = _compare_step(raw, ours, names, tolerance, report, path=path)
+            equal, beyond = _compare_step(
+                raw, ours, names, tolerance, report, path=path, joint_names=joint_names
+            )
             if on_step is not None:
                 on_step(raw.step)
             if equal:
@@ -658,6 +674,7 @@ def diff_logs(
                 path=path_a,
                 paths=(path_a, path_b),
                 sides=("in A", "in B"),
+                joint_names=[j.name for j in scene_a.joints],
             )
             # payloads equal in both logs were not decoded: check them once (two copies of a
             # damaged log are not identical logs)

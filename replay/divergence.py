@@ -9,7 +9,13 @@ from collections.abc import Callable
 import numpy as np
 
 from recorder import schema as S
-from recorder.reader import DECODE_ERRORS, WorldTable, check_bodies, contacts_from_message
+from recorder.reader import (
+    DECODE_ERRORS,
+    WorldTable,
+    check_bodies,
+    contacts_from_message,
+    joints_from_message,
+)
 from replay.report import Divergence
 
 # per-row 2-vector fields, flattened x0, y0, x1, y1 ... in the log
@@ -80,6 +86,8 @@ def _decoded(message: str, topic: str, payload: bytes, side: int, n_bodies: int)
             check_bodies(d)
         elif topic == "/world":
             WorldTable.from_message(d)
+        elif topic == "/joints":
+            joints_from_message(d)
         elif topic == "/contacts":
             contacts_from_message(d)
             for side_name, idx in (("a", d["a"]), ("b", d["b"])):
@@ -290,6 +298,41 @@ def check_payload(topic: str, payload: bytes, n_bodies: int) -> None:
     _decoded(S.TOPICS[topic], topic, payload, 0, n_bodies)
 
 
+# per-joint values of each /joints field (2-vectors and the solver's impulse columns)
+_JOINT_WIDTH = {
+    "anchor_a": 2,
+    "anchor_b": 2,
+    "linear_impulse": 2,
+    "error": 2,
+    "impulses": 6,
+}
+
+
+def _locate_joints(f: _Finder, step: int, dl: dict, dr: dict, joint_names) -> Divergence | None:
+    """The first difference of two /joints messages: the joint (index, name), the field and,
+    for a field of several values per joint, which (x / y, or the impulse column)."""
+    ml, mr = dl["angular_impulse"].size, dr["angular_impulse"].size
+    if ml != mr:
+        return Divergence(step, "/joints", "count", field="joints", logged=ml, replayed=mr)
+    f.scalar("step", dl["step"], dr["step"], is_float=False)
+    f.scalar("time", dl["time"], dr["time"], is_float=True)
+
+    def joint(i: int, w: int) -> dict:
+        k = i // w
+        name = str(joint_names[k]) if joint_names is not None and k < len(joint_names) else None
+        out = {"index": k, "name": name}
+        if w == 2:
+            out["component"] = "xy"[i % 2]
+        elif w > 2:
+            out["component"] = f"J{i % w}"
+        return {"joint": out}
+
+    for name, _num, _typ, _repeated in S.spec("Joints")[2:]:
+        w = _JOINT_WIDTH.get(name, 1)
+        f.array(name, dl[name], dr[name], is_float=True, where=lambda i, w=w: joint(i, w))
+    return None
+
+
 def locate(
     topic: str,
     step: int,
@@ -297,6 +340,7 @@ def locate(
     replayed: bytes,
     names: list,
     tolerance: float | None = None,
+    joint_names: list | None = None,
 ) -> tuple[Divergence | None, int | None]:
     """Decode two payloads of ``topic`` that differ in bytes and find where.
 
@@ -312,7 +356,7 @@ def locate(
     def body(i: int) -> dict:
         return {"body": i, "body_name": str(names[i]) if 0 <= i < len(names) else None}
 
-    spec = S.MESSAGES[message]
+    spec = S.spec(message)
     if topic == "/bodies":
         nl, nr = dl["angle"].size, dr["angle"].size
         if nl != nr:
@@ -329,6 +373,10 @@ def locate(
     elif topic == "/stats":
         for name, _num, typ, _repeated in spec:
             f.scalar(name, dl[name], dr[name], is_float=typ == "double")
+    elif topic == "/joints":
+        d = _locate_joints(f, step, dl, dr, joint_names)
+        if d is not None:
+            return d, None
     else:  # /world
         f.scalar("step", dl["step"], dr["step"], is_float=False)
         f.scalar("time", dl["time"], dr["time"], is_float=True)
@@ -362,6 +410,30 @@ def locate(
                             ),
                             1,
                         )
+        jl, jr = dl.get("joints", []), dr.get("joints", [])
+        if len(jl) != len(jr):
+            return Divergence(
+                step, topic, "count", field="joints", logged=len(jl), replayed=len(jr)
+            ), None
+        for k, (a, b) in enumerate(zip(jl, jr)):
+            where = lambda _j, k=k, a=a: {"joint": {"index": k, "name": a["name"]}}  # noqa: E731
+            for name, _num, typ, _repeated in S.spec("Joint"):
+                if typ == "double":
+                    f.array(f"joints.{name}", a[name], b[name], is_float=True, where=where)
+                elif a[name] != b[name]:
+                    f.bit_differences += 1
+                    f._add(
+                        Divergence(
+                            step,
+                            topic,
+                            "value",
+                            field=f"joints.{name}",
+                            logged=a[name],
+                            replayed=b[name],
+                            **where(0),
+                        ),
+                        1,
+                    )
     return f.result(), f.max_ulps
 
 

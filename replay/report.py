@@ -53,8 +53,13 @@ class Divergence:
     differing_values: int = 1
     max_ulps: int | None = None
     detail: str = ""
+    joint: dict | None = None  # /joints and /world's joints: index, name (and component)
 
     def where(self) -> str:
+        if self.joint is not None:
+            j = self.joint
+            part = f", {j['component']}" if j.get("component") else ""
+            return f"joint {j.get('name')!r} (index {j['index']}{part})"
         if self.body is not None:
             return f"body {self.body_name!r} (index {self.body})"
         if self.contact is not None:

@@ -267,17 +267,74 @@ def _print_step(log, k: int, *, body: str | None = None, form: str = "table") ->
             f"  kinetic {_g(st['kinetic_energy'])} J, potential {_g(st['potential_energy'])} J, "
             f"state hash {st['state_hash'][:16]}..."
         )
-    if not rows:
-        return 0
-    widths = [max(len(h), *(len(row[j]) for row in rows)) for j, h in enumerate(_COLUMNS)]
-    print("  ".join(h.rjust(wd) for h, wd in zip(_COLUMNS, widths)))
+    if rows:
+        _print_table(_COLUMNS, rows)
+        print(
+            "units: m (point, depths, push), N s (impulse, tangent_imp); normal from a to b; "
+            "pair_depth: the pair's MTD, point_depth: the point's own penetration"
+        )
+    if logged.world.joints and r.joints is not None:
+        print(f"{len(logged.world.joints)} joint(s):")
+        _print_table(_JOINT_COLUMNS, _joint_rows(logged.world.joints, r.joints, names))
+        print(
+            "units: m, world (anchors, error_m); N s, world, on b (lin_imp; a takes minus it); "
+            "N m s or N s (ang_imp, motor_imp, limit_imp); rad (error_rad)"
+        )
+    return 0
+
+
+def _print_table(columns, rows) -> None:
+    widths = [max(len(h), *(len(row[j]) for row in rows)) for j, h in enumerate(columns)]
+    print("  ".join(h.rjust(wd) for h, wd in zip(columns, widths)))
     for row in rows:
         print("  ".join(x.rjust(wd) for x, wd in zip(row, widths)))
-    print(
-        "units: m (point, depths, push), N s (impulse, tangent_imp); normal from a to b; "
-        "pair_depth: the pair's MTD, point_depth: the point's own penetration"
-    )
-    return 0
+
+
+_JOINT_COLUMNS = (
+    "joint",
+    "type",
+    "a",
+    "b",
+    "anchor_a_x",
+    "anchor_a_y",
+    "anchor_b_x",
+    "anchor_b_y",
+    "lin_imp_x",
+    "lin_imp_y",
+    "ang_imp",
+    "motor_imp",
+    "limit_imp",
+    "error_m",
+    "error_rad",
+)
+
+
+def _joint_rows(table, j, names) -> list[tuple[str, ...]]:
+    """The joints table's rows (`_JOINT_COLUMNS`): the /world joint table beside the step's
+    /joints values."""
+    rows = []
+    for i, spec in enumerate(table):
+        a, b = int(spec["a"]), int(spec["b"])
+        rows.append(
+            (
+                str(spec["name"]),
+                str(spec["type"]),
+                f"{a}:{names[a]}",
+                f"{b}:{names[b]}",
+                _g(j.anchor_a[i, 0]),
+                _g(j.anchor_a[i, 1]),
+                _g(j.anchor_b[i, 0]),
+                _g(j.anchor_b[i, 1]),
+                _g(j.linear_impulse[i, 0]),
+                _g(j.linear_impulse[i, 1]),
+                _g(j.angular_impulse[i]),
+                _g(j.motor_impulse[i]),
+                _g(j.limit_impulse[i]),
+                _g(j.error[i, 0]),
+                _g(j.error[i, 1]),
+            )
+        )
+    return rows
 
 
 def _print_step_json(logged, names, keep) -> int:
@@ -319,6 +376,22 @@ def _print_step_json(logged, names, keep) -> int:
             "restitution": rows(c.restitution),
         },
     }
+    if logged.world.joints and r.joints is not None:
+        j = r.joints
+        out["joints"] = {
+            "name": [str(x["name"]) for x in logged.world.joints],
+            "type": [str(x["type"]) for x in logged.world.joints],
+            "a": [int(x["a"]) for x in logged.world.joints],
+            "b": [int(x["b"]) for x in logged.world.joints],
+            "anchor_a_m": j.anchor_a.tolist(),
+            "anchor_b_m": j.anchor_b.tolist(),
+            "linear_impulse_Ns": j.linear_impulse.tolist(),
+            "angular_impulse": j.angular_impulse.tolist(),
+            "motor_impulse": j.motor_impulse.tolist(),
+            "limit_impulse": j.limit_impulse.tolist(),
+            "error": j.error.tolist(),
+            "impulses": j.impulses.tolist(),
+        }
     json.dump(out, sys.stdout, allow_nan=False)
     sys.stdout.write("\n")
     return 0

@@ -136,3 +136,47 @@ def test_every_channel_decodes_with_foxglove_typescript_stack_bit_for_bit(tmp_pa
     ):
         want = getattr(c, ours).reshape(-1)
         assert np.array_equal(np.array(js[name], dtype=np.float64), want), name
+
+
+@pytest.mark.parametrize("compression", ["lz4", "none"])
+def test_joint_channels_decode_with_foxglove_typescript_stack_bit_for_bit(tmp_path, compression):
+    """A scene with joints: /world's joint table and /joints decode in the same stack."""
+    from isaac.engine.simulation import Simulation
+    from isaac.scene import load_scene
+    from recorder import Recorder
+
+    modules = _node_modules()
+    scene = load_scene(REPO / "scenes" / "double_pendulum.yaml")
+    log = tmp_path / "joints.mcap"
+    sim = Simulation(scene)
+    with Recorder(sim, str(log), compression=compression, offload="none") as rec:
+        for r in sim.run(30):
+            rec.write(r)
+    node = subprocess.run(
+        [shutil.which("node"), str(modules / "decode_mcap.mjs"), str(log)],
+        cwd=modules,
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert node.returncode == 0, node.stderr
+    decoded = json.loads(node.stdout)
+    steps = list(LogReader(str(log)).steps())
+    assert decoded["counts"]["/joints"] == len(steps) == 31
+    last = steps[-1].record.joints
+    js = decoded["joints"]
+    assert js["step"] == steps[-1].step
+    for name in ("anchor_a", "anchor_b", "linear_impulse", "error", "impulses"):
+        assert np.array_equal(
+            np.array(js[name], dtype=np.float64), getattr(last, name).reshape(-1)
+        ), name
+    for name in ("angular_impulse", "motor_impulse", "limit_impulse"):
+        assert np.array_equal(np.array(js[name], dtype=np.float64), getattr(last, name)), name
+    table = decoded["jointTable"]
+    assert [j["name"] for j in table] == [j.name for j in scene.joints]
+    assert [j["type"] for j in table] == [j.kind for j in scene.joints]
+    for j, spec in zip(table, scene.joints):
+        assert (int(j["a"]), int(j["b"])) == (spec.a, spec.b)
+        assert tuple(j["local_a"]) == spec.local_a and tuple(j["local_b"]) == spec.local_b
+        lower = -np.inf if spec.lower is None else spec.lower
+        assert float(j["lower"]) == lower  # "-Infinity" for no limit

@@ -129,7 +129,7 @@ def summary_crc(data: bytearray) -> None:
 def encode(message: str, d: dict) -> bytes:
     """Protobuf bytes of a decoded message dict (any array lengths: for crafting bad ones)."""
     parts = []
-    for name, number, typ, repeated in S.MESSAGES[message]:
+    for name, number, typ, repeated in S.spec(message):
         value = d[name]
         if typ.startswith("message:"):
             sub = typ.split(":", 1)[1]

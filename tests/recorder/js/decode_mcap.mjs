@@ -30,6 +30,8 @@ for (const [id, schema] of reader.schemasById) {
 const counts = {};
 const bodies = [];
 let contacts = null;
+let joints = null;
+let world = null;
 for await (const msg of reader.readMessages()) {
   const channel = reader.channelsById.get(msg.channelId);
   const type = types.get(channel.schemaId);
@@ -37,6 +39,8 @@ for await (const msg of reader.readMessages()) {
   counts[channel.topic] = (counts[channel.topic] ?? 0) + 1;
   if (channel.topic === "/bodies") bodies.push(decoded);
   if (channel.topic === "/contacts" && decoded.a.length) contacts = decoded;
+  if (channel.topic === "/joints") joints = decoded;
+  if (channel.topic === "/world" && world === null) world = decoded;
 }
 const pick = (m) => ({ step: Number(m.step), position: m.position, velocity: m.velocity,
                       angle: m.angle,
@@ -48,7 +52,20 @@ const CONTACT_FIELDS = ["substep", "a", "b", "feature", "points", "normal", "pai
                         "restitution"];
 const pickContacts = (m) => Object.fromEntries(
   [["step", Number(m.step)], ...CONTACT_FIELDS.map((f) => [f, field(m, f)])]);
+const JOINTS_FIELDS = ["anchor_a", "anchor_b", "linear_impulse", "angular_impulse",
+                       "motor_impulse", "limit_impulse", "error", "impulses"];
+const pickJoints = (m) => Object.fromEntries(
+  [["step", Number(m.step)], ...JOINTS_FIELDS.map((f) => [f, field(m, f)])]);
+// the joint table (a scene with joints): infinite limits as strings (JSON has no infinity)
+const JOINT_FIELDS = ["index", "name", "type", "a", "b", "local_a", "local_b", "axis",
+                      "reference_angle", "length", "min_length", "max_length", "stiffness",
+                      "damping_ratio", "lower", "upper", "motor_speed", "max_motor", "spring",
+                      "motor", "collide_connected"];
+const finite = (x) => (typeof x === "number" && !Number.isFinite(x) ? String(x) : x);
+const pickJoint = (j) => Object.fromEntries(JOINT_FIELDS.map((f) => [f, finite(field(j, f))]));
 // numbers are written by JSON.stringify as the shortest round-trip decimal, as Python's repr
 console.log(JSON.stringify({ counts, first: pick(bodies[0]), last: pick(bodies.at(-1)),
-                             contacts: contacts && pickContacts(contacts) }));
+                             contacts: contacts && pickContacts(contacts),
+                             joints: joints && pickJoints(joints),
+                             jointTable: world && (world.joints ?? []).map(pickJoint) }));
 await fh.close();
