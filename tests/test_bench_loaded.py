@@ -66,8 +66,10 @@ def test_zero_loops_is_a_no_op():
 # way out prints their exit codes as `busy_loops` left them (None: not stopped and waited for)
 _HOLDER = textwrap.dedent(
     """
-    import sys, time
+    import signal, sys, time
     from bench.loaded import busy_loops
+    # Ctrl-C's usual handler, even when started from a shell job that ignores SIGINT
+    signal.signal(signal.SIGINT, signal.default_int_handler)
     procs = []
     try:
         with busy_loops(2) as procs:
