@@ -153,6 +153,14 @@ def joints_trailer(step: int, time: float, joints) -> bytes:
     )
 
 
+def joints_finite(joints) -> bool:
+    """Whether every float of ``joints`` (`JointRows`) is finite (the compiled packer checks
+    the bodies and contacts, not the joints)."""
+    from isaac.engine.records import JOINT_FIELDS
+
+    return all(np.isfinite(getattr(joints, f)).all() for f in JOINT_FIELDS)
+
+
 def put_trailer(buf: np.ndarray, pos: int, trailer: bytes) -> None:
     """Copy a trailer to byte ``pos`` of ``buf`` (uint8): right after the frame's messages."""
     if trailer:

@@ -304,7 +304,12 @@ class Recorder:
         if self.closed:
             raise LogError("the recorder is closed")
         writers = [w for w in (self.mcap, self.rerun) if w is not None]
-        if not writers or not all(getattr(w, "takes_batches", False) for w in writers):
+        if (
+            not writers
+            or not all(getattr(w, "takes_batches", False) for w in writers)
+            or not _batch_joints_finite(batch)
+        ):
+            # one by one: a step whose joints hold a NaN or infinity stops there, named
             for s in range(batch.steps):
                 self.write(batch.record(s))
             return
@@ -402,6 +407,15 @@ class Recorder:
         else:
             self.close(complete=False, reason=f"{exc_type.__name__}: {exc}")
         return False
+
+
+def _batch_joints_finite(batch) -> bool:
+    """Whether every joint float of a `StepBatch` is finite (True without joints): the batch
+    packers check the bodies and contacts only."""
+    joints = getattr(batch, "_joints", None)  # (steps, m, ...) per field, None without joints
+    if joints is None:
+        return True
+    return all(np.isfinite(a).all() for a in joints)
 
 
 def _same_state(a: StepRecord, b: StepRecord) -> bool:

@@ -68,6 +68,18 @@ def check_finite(names, record: StepRecord) -> None:
     """Raise `SimulationError` (naming step and body) if the record holds a NaN or infinity."""
     from isaac.engine import diagnostics
 
+    joints = record.joints
+    if joints is not None:
+        from isaac.engine.records import JOINT_FIELDS
+
+        for field in JOINT_FIELDS:
+            k = _first_bad_row(np.asarray(getattr(joints, field)))
+            if k is not None:
+                raise SimulationError(
+                    f"step {record.step}: joint {k} has a non-finite {field}; the log keeps "
+                    f"steps up to {record.step - 1}",
+                    step=record.step,
+                )
     if diagnostics.all_finite(record):
         return
     for field in _BODY_FLOATS:

@@ -63,6 +63,7 @@ from recorder.frames import (
     Frame,
     batch_frame_sizes_with_joints,
     frame_sizes,
+    joints_finite,
     joints_trailer,
     pack,
     pack_batch,
@@ -308,6 +309,8 @@ class WriterProcess:
         """
         if self.kind == "rerun":
             return self._write_rerun(record, stats)
+        if record.joints is not None and not joints_finite(record.joints):
+            return False
         bodies_size, contacts_size, size = frame_sizes(record)
         trailer = joints_trailer(int(record.step), float(record.time), record.joints)
         if size + len(trailer) > self.capacity or not self._compiled:

@@ -274,3 +274,36 @@ def test_one_ulp_in_the_joint_table_is_named(logs, tmp_path):
     first = replay_log(str(edited)).divergences[0]
     assert (first.step, first.channel, first.field, first.ulps) == (0, "/world", "joints.length", 1)
     assert first.joint == {"index": 0, "name": name}
+
+
+@pytest.mark.parametrize("offload", ["none", "process"])
+@pytest.mark.parametrize("batches", [False, True])
+def test_a_non_finite_joint_value_stops_the_run_and_keeps_the_steps_before(
+    tmp_path, offload, batches
+):
+    import dataclasses
+
+    from isaac.engine.records import JointRows, StepBatch, StepRecord
+    from isaac.errors import SimulationError
+
+    sim = Simulation(load_scene(SCENES / "double_pendulum.yaml"))
+    records = list(sim.run(20))
+    bad_step = records[12].step
+    j = records[12].joints
+    error = np.array(j.error)
+    error[1, 0] = np.nan
+    fields = {f: getattr(records[12], f) for f in StepRecord.__dataclass_fields__}
+    records[12] = StepRecord(**{**fields, "joints": dataclasses.replace(j, error=error)})
+    assert isinstance(records[12].joints, JointRows)
+    path = tmp_path / "nan.mcap"
+    fresh = Simulation(load_scene(SCENES / "double_pendulum.yaml"))
+    with pytest.raises(SimulationError, match=f"step {bad_step}: joint 1 has a non-finite error"):
+        with Recorder(fresh, str(path), offload=offload, compression="none") as rec:
+            if batches:
+                rec.write_batch(StepBatch.of_records(records, fresh.scene.world.dt))
+            else:
+                for r in records:
+                    rec.write(r)
+    steps = list(LogReader(str(path)).steps())
+    assert [s.step for s in steps] == list(range(bad_step))
+    assert all(np.isfinite(s.record.joints.error).all() for s in steps)
