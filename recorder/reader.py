@@ -196,6 +196,11 @@ class LogSummary:
     energy_end: float | None = None
     world_changes: int = 0
     messages: dict = field(default_factory=dict)
+    # a log with joints: the largest position error left after a step's correction (m, the
+    # anchors' distance off the constraint), the step and the joint index holding it
+    max_joint_error: float = 0.0
+    max_joint_error_step: int | None = None
+    max_joint_error_joint: int | None = None
 
 
 def _sized(msg: dict, topic: str, key: str, n: int, what: str):
@@ -587,6 +592,12 @@ class LogReader:
                 j = float(np.max(c.impulse))
                 if s.max_impulse_step is None or j > s.max_impulse:
                     s.max_impulse, s.max_impulse_step = j, r.step
+            if r.joints is not None and len(r.joints):
+                k = int(np.argmax(r.joints.error[:, 0]))
+                e = float(r.joints.error[k, 0])
+                if s.max_joint_error_step is None or e > s.max_joint_error:
+                    s.max_joint_error, s.max_joint_error_step = e, r.step
+                    s.max_joint_error_joint = k
             if logged.stats is not None:
                 if s.energy_start is None:
                     s.energy_start = logged.stats["total_energy"]

@@ -131,6 +131,19 @@ def _inspect(args: argparse.Namespace) -> int:
     depth = f"{_g(s.max_depth)} m (step {s.max_depth_step})" if s.contacts else "-"
     impulse = f"{_g(s.max_impulse)} N s (step {s.max_impulse_step})" if s.contacts else "-"
     print(f"contacts {s.contacts} in all; max depth {depth}; largest impulse {impulse}")
+    joints = log.world.joints if s.steps else ()
+    if joints:
+        kinds = {}
+        for j in joints:
+            kinds[j["type"]] = kinds.get(j["type"], 0) + 1
+        mix = ", ".join(f"{count} {kind}" for kind, count in kinds.items())
+        worst = (
+            f"; largest error {_g(s.max_joint_error)} m "
+            f"({joints[s.max_joint_error_joint]['name']!r}, step {s.max_joint_error_step})"
+            if s.max_joint_error_step is not None
+            else ""
+        )
+        print(f"joints   {len(joints)} ({mix}){worst}")
     if s.energy_start is not None:
         print(
             f"energy   start {_g(s.energy_start)} J, end {_g(s.energy_end)} J (kinetic + potential)"

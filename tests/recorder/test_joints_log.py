@@ -307,3 +307,21 @@ def test_a_non_finite_joint_value_stops_the_run_and_keeps_the_steps_before(
     steps = list(LogReader(str(path)).steps())
     assert [s.step for s in steps] == list(range(bad_step))
     assert all(np.isfinite(s.record.joints.error).all() for s in steps)
+
+
+def test_inspect_summary_names_the_largest_joint_error(logs):
+    from isaac.app.logs import _g
+
+    path = logs["double_pendulum", "none", False][0]
+    scene = load_scene(SCENES / "double_pendulum.yaml")
+    errors = np.array([s.record.joints.error[:, 0] for s in LogReader(str(path)).steps()])
+    step, joint = np.unravel_index(int(np.argmax(errors)), errors.shape)
+    assert errors.max() > 0.0
+    done = _isaac("inspect", str(path))
+    assert done.returncode == 0, done.stderr
+    line = next(x for x in done.stdout.splitlines() if x.startswith("joints "))
+    kinds = sorted({j.kind for j in scene.joints})
+    assert line.startswith(f"joints   {len(scene.joints)} (")
+    assert all(kind in line for kind in kinds)
+    want = f"largest error {_g(errors.max())} m ({scene.joints[joint].name!r}, step {step})"
+    assert line.endswith(want), line
