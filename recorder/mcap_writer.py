@@ -19,6 +19,7 @@ Nothing here uses wall-clock time: two runs of one scene give byte-identical fil
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import json
 import os
@@ -227,12 +228,28 @@ JOINT_WIRE = (
 )
 
 
+@functools.lru_cache(maxsize=256)
+def _packed_prefix(number: int, nbytes: int) -> bytes:
+    return S.enc_bytes(number, b"")[:-1] + S.varint(nbytes)
+
+
 def encode_joints(step: int, time: float, joints) -> bytes:
-    """``isaac.log.Joints``: the step's `isaac.engine.records.JointRows`, raw float64."""
+    """``isaac.log.Joints``: the step's `isaac.engine.records.JointRows`, raw float64 (what
+    `recorder.schema.packed` writes, its field prefixes cached: a step's joints have the same
+    sizes every step)."""
     parts = [S.enc_uint(1, step), S.enc_double(2, time)]
     for number, name in JOINT_WIRE:
-        S.packed(parts, number, getattr(joints, name), "<f8")
+        a = getattr(joints, name)
+        if a.size == 0:
+            continue
+        if a.dtype != _F8 or not a.flags.c_contiguous:
+            a = np.ascontiguousarray(a, dtype=_F8)
+        parts.append(_packed_prefix(number, a.nbytes))
+        parts.append(a)
     return b"".join(parts)
+
+
+_F8 = np.dtype("<f8")
 
 
 def encode_world(model, step: int, time: float, exists: np.ndarray, joints=()) -> bytes:
