@@ -42,6 +42,7 @@ Transport (both ends in this module):
 
 from __future__ import annotations
 
+import gc
 import json
 import mmap
 import os
@@ -613,8 +614,19 @@ class WriterProcess:
         os.close(self._rep)
         del self._ring_u8
         self._view.release()
-        self._ring.close()
         self._stderr.close()
+        try:
+            self._ring.close()
+        except BufferError:
+            # a view of the ring is still alive somewhere (a frame kept by an exception's
+            # traceback: seen once, on a fresh machine, closing a diverged run's log). The
+            # child wrote the file; this is only the parent's mapping: collect and try again,
+            # else it is unmapped when the last view goes.
+            gc.collect()
+            try:
+                self._ring.close()
+            except BufferError:
+                pass
 
 
 # -- child side --------------------------------------------------------------------------------
