@@ -40,8 +40,9 @@ from typing import NamedTuple
 import numba
 import numpy as np
 
-from isaac import trig
 from isaac.engine import kernel_cache  # noqa: F401  (first: keys the kernels' numba cache)
+from isaac.engine.geometry import sin_cos
+from isaac.engine.integrate import PI, TWO_PI
 
 REVOLUTE = 0
 DISTANCE = 1
@@ -52,9 +53,6 @@ KIND_CODES = {"revolute": REVOLUTE, "distance": DISTANCE, "weld": WELD, "prismat
 # Box2D 2.3's caps on one position correction (b2_maxLinearCorrection, b2_maxAngularCorrection)
 MAX_LINEAR_CORRECTION = 0.2  # m
 MAX_ANGULAR_CORRECTION = 8.0 / 180.0 * np.pi  # rad
-
-PI = np.pi
-TWO_PI = 2.0 * np.pi
 
 # scratch columns
 RAX, RAY, RBX, RBY = 0, 1, 2, 3  # world anchor arms (m)
@@ -110,26 +108,17 @@ def joint_table(joints, n_bodies: int) -> tuple[Joints, np.ndarray]:
     def pairs(get):
         return np.array([get(j) for j in joints], dtype=np.float64).reshape(m, 2)
 
-    def limits(j):
-        if j.kind == "distance":
-            lo = -np.inf if j.min_length is None else j.min_length
-            hi = np.inf if j.max_length is None else j.max_length
-            return lo, hi
-        lo = -np.inf if j.lower is None else j.lower
-        hi = np.inf if j.upper is None else j.upper
-        return lo, hi
+    def given(j):  # the limits the scene gives (None: none on that side)
+        return (j.min_length, j.max_length) if j.kind == "distance" else (j.lower, j.upper)
 
-    has_limit = col(
-        lambda j: (
-            (j.min_length, j.max_length) != (None, None)
-            if j.kind == "distance"
-            else (j.lower, j.upper) != (None, None)
-        ),
-        bool,
-    )
+    def bound(value, none):
+        return none if value is None else value
+
+    has_limit = col(lambda j: given(j) != (None, None), bool)
     spring = col(lambda j: j.stiffness is not None and j.kind in ("distance", "weld"), bool)
+    kind = col(lambda j: KIND_CODES[j.kind], np.int64)
     table = Joints(
-        kind=col(lambda j: KIND_CODES[j.kind], np.int64),
+        kind=kind,
         a=col(lambda j: j.a, np.int64),
         b=col(lambda j: j.b, np.int64),
         local_a=pairs(lambda j: j.local_a),
@@ -137,10 +126,12 @@ def joint_table(joints, n_bodies: int) -> tuple[Joints, np.ndarray]:
         axis=pairs(lambda j: j.axis),
         reference_angle=col(lambda j: j.reference_angle),
         length=col(lambda j: j.length),
-        rigid=col(lambda j: j.stiffness is None, bool) & ~(has_limit & (col(_is_distance, bool))),
+        # a distance joint with limits acts only at them; every other joint without a spring is
+        # rigid
+        rigid=col(lambda j: j.stiffness is None, bool) & ~(has_limit & (kind == DISTANCE)),
         has_limit=has_limit,
-        lower=col(lambda j: limits(j)[0]),
-        upper=col(lambda j: limits(j)[1]),
+        lower=col(lambda j: bound(given(j)[0], -np.inf)),
+        upper=col(lambda j: bound(given(j)[1], np.inf)),
         spring=spring,
         stiffness=col(lambda j: 0.0 if j.stiffness is None else j.stiffness),
         damping_ratio=col(lambda j: j.damping_ratio),
@@ -152,13 +143,6 @@ def joint_table(joints, n_bodies: int) -> tuple[Joints, np.ndarray]:
         {min(j.a, j.b) * n_bodies + max(j.a, j.b) for j in joints if not j.collide_connected}
     )
     return table, np.array(keys, dtype=np.int64)
-
-
-def _is_distance(j) -> bool:
-    return j.kind == "distance"
-
-
-sin_cos = numba.njit(cache=True, nogil=True)(trig.sin_cos)
 
 
 @numba.njit(cache=True, nogil=True, inline="always")

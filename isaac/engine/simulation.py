@@ -33,7 +33,6 @@ from isaac.scene import Scene
 
 __all__ = ["DIVERGED_ANGLE", "DIVERGED_POSITION", "DIVERGED_SPEED", "BodyView", "Simulation"]
 _FIELDS = ("position", "velocity", "angle", "angular velocity")
-_LAZY = object()  # the joints of a step advance() took: made with its contacts when asked for
 
 
 class Simulation:
@@ -195,14 +194,14 @@ class Simulation:
         taken, body, field, _ = self._drive(steps, None)
         if body >= 0:
             # advance keeps no contacts: the state is the one before the failing step
-            self._contacts = Contacts.empty() if taken or self._contacts is None else self._contacts
-            if taken or self._joints is _LAZY:
+            if taken or self._contacts is None:
+                self._contacts = Contacts.empty()
                 self._joints = initial_joint_rows(self.model, self.state, self._work)
             self._last = self.record()
             self._fail(self.state.step + 1, body, field)
-        # the last step's contacts are computed again from its start if asked for (record())
+        # the last step's contacts (and joints) are computed again from its start if asked for
+        # (record()): None marks both as not made yet
         self._contacts = None
-        self._joints = _LAZY
         self._last = None
 
     def _contacts_now(self) -> Contacts:

@@ -371,18 +371,7 @@ def substep(
         add_gravity(state.velocity, work.movable, state.exists, cfg.gx, cfg.gy, cfg.h)
     joints = work.joint_scratch.shape[0] > 0
     if joints:
-        prepare_joints(
-            model.joints,
-            work.joint_scratch,
-            state.position,
-            state.angle,
-            state.exists,
-            model.inv_mass,
-            model.inv_inertia,
-            cfg.h,
-            cache.joints,
-            cfg.warm_starting,
-        )
+        _prepare_joints(model, state, work, cfg.h, cache.joints, cfg.warm_starting)
     if solve:
         resolve(model, cfg, state, work, cache, rows)
     # 6. integration (the seed's explicit Euler: gravity last), then the joints' position pass
@@ -409,6 +398,22 @@ def substep(
             work.joint_error,
         )
     return work.contacts(rows, index)
+
+
+def _prepare_joints(model, state, work, h: float, warm: np.ndarray, warm_starting: bool) -> None:
+    """`prepare_joints` on the workspace's joint rows at the current pose (h: the sub-step, s)."""
+    prepare_joints(
+        model.joints,
+        work.joint_scratch,
+        state.position,
+        state.angle,
+        state.exists,
+        model.inv_mass,
+        model.inv_inertia,
+        h,
+        warm,
+        warm_starting,
+    )
 
 
 def joint_rows(model: Model, state: State, work: Workspace) -> JointRows | None:
@@ -441,18 +446,7 @@ def initial_joint_rows(model: Model, state: State, work: Workspace) -> JointRows
     m = work.joint_scratch.shape[0]
     if m == 0:
         return None
-    prepare_joints(
-        model.joints,
-        work.joint_scratch,
-        state.position,
-        state.angle,
-        state.exists,
-        model.inv_mass,
-        model.inv_inertia,
-        1.0,
-        np.zeros((m, JOINT_IMPULSES)),
-        False,
-    )
+    _prepare_joints(model, state, work, 1.0, np.zeros((m, JOINT_IMPULSES)), False)
     work.joint_error[:] = 0.0
     return joint_rows(model, state, work)
 
