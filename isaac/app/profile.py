@@ -1,64 +1,46 @@
-"""Per-stage timings for `isaac run --profile`.
+"""Per-stage timings for `isaac run --profile`, measured inside the compiled driver.
 
-Wraps the stage kernels that `isaac.engine.step` calls with timers (wall time, perf_counter), so the
-step runs unchanged and pays nothing when profiling is off. Timings include the call overhead of
-each kernel, which is part of what a step costs.
+`Simulation(scene, profile=True)` steps through the timed driver (`isaac.engine.driver`): the
+same stage kernels, in the same order, with a monotonic clock read between stages
+(`isaac.engine.clock`), compiled apart from the plain driver, so a run without --profile carries
+no clock read. The physics is the same bits (tests/test_profile.py). This module turns the
+totals (`Simulation.stage_times`) into what the user reads.
 """
 
 from __future__ import annotations
 
-import time
-
-from isaac.engine import step as step_module
-
-STAGES = {
-    "transform": "geometry",
-    "speculative_reach": "broad phase",
-    "find_pairs": "broad phase",
-    "collide_pairs": "narrow phase",
-    "match_previous": "narrow phase",
-    "push_out": "push-out",
-    "add_gravity": "integration",
-    "solve_contacts": "impulses",
-    "advance_positions": "integration",
-}
+# what each stage covers, said once under the table
+_DRIVER_NOTE = (
+    "driver = its own work: each step's start kept to undo it, contacts carried to the next "
+    "sub-step, the divergence check, states and rows copied into the batch"
+)
 
 
-class Profiler:
-    def __init__(self) -> None:
-        self.seconds: dict[str, float] = {}
-        self._originals: dict[str, object] = {}
+def report(times: dict[str, float], steps: int, loop_ms_per_step: float | None = None) -> str:
+    """The per-stage table: ms/step and share of the driver's time per stage, largest first,
+    then the clock reads' own cost (the total less the stages) and the driver's total beside
+    the run loop's rate (loop_ms_per_step, ms; None when too few steps to measure one).
 
-    def _wrap(self, name: str, stage: str):
-        original = getattr(step_module, name)
-        self._originals[name] = original
-        seconds = self.seconds
-        seconds.setdefault(stage, 0.0)
-
-        def timed(*args):
-            t0 = time.perf_counter()
-            result = original(*args)
-            seconds[stage] += time.perf_counter() - t0
-            return result
-
-        setattr(step_module, name, timed)
-
-    def restore(self) -> None:
-        for name, original in self._originals.items():
-            setattr(step_module, name, original)
-        self._originals.clear()
-
-    def report(self, steps: int) -> str:
-        total = sum(self.seconds.values())
-        lines = [f"  per-stage time over {steps} steps (ms/step, share of kernel time):"]
-        for stage, sec in sorted(self.seconds.items(), key=lambda kv: -kv[1]):
-            share = sec / total if total else 0.0
-            lines.append(f"    {stage:<13} {1e3 * sec / max(steps, 1):9.4f}  {100 * share:5.1f}%")
-        return "\n".join(lines)
-
-
-def enable_profiling() -> Profiler:
-    profiler = Profiler()
-    for name, stage in STAGES.items():
-        profiler._wrap(name, stage)
-    return profiler
+    times: `Simulation.stage_times()` (s); steps: the steps those calls took."""
+    per = max(steps, 1)
+    total = times.get("total", 0.0)
+    stages = {k: v for k, v in times.items() if k != "total"}
+    lines = [
+        f"  time per step inside the compiled driver, over {steps} steps "
+        "(ms/step, share of the driver's time):"
+    ]
+    for stage, sec in sorted(stages.items(), key=lambda kv: -kv[1]):
+        share = sec / total if total > 0 else 0.0
+        lines.append(f"    {stage:<13} {1e3 * sec / per:9.4f}  {100 * share:5.1f}%")
+    reads = max(total - sum(stages.values()), 0.0)
+    share = reads / total if total > 0 else 0.0
+    lines.append(f"    {'clock reads':<13} {1e3 * reads / per:9.4f}  {100 * share:5.1f}%")
+    whole = f"  driver total {1e3 * total / per:.4f} ms/step"
+    if loop_ms_per_step is not None:
+        whole += (
+            f"; the run's loop {loop_ms_per_step:.4f} ms/step after its first step (with Python "
+            "between batches, records, files)"
+        )
+    lines.append(whole)
+    lines.append(f"  ({_DRIVER_NOTE})")
+    return "\n".join(lines)

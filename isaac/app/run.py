@@ -155,15 +155,11 @@ def cmd_run(args: argparse.Namespace) -> int:
     _warn("run", scene, steps)
     claims = _claim_outputs(args)
     try:
-        sim = Simulation(scene, staged=args.profile)  # --profile times the staged stages
+        sim = Simulation(scene, profile=args.profile)  # --profile: the timed driver
     except BaseException:
         for c in claims.values():
             c.release(discard=True)
         raise
-    if args.profile:
-        from isaac.app.profile import enable_profiling
-
-        profiler = enable_profiling()
     recorder = None
     first = last = sim.record()
     energy_start = _energy(sim, first)
@@ -304,7 +300,9 @@ def cmd_run(args: argparse.Namespace) -> int:
             f"(includes loading or compiling the kernels)"
         )
     if args.profile:
-        print(profiler.report(taken))
+        from isaac.app.profile import report
+
+        print(report(sim.stage_times(), taken, 1e3 / rate if rate else None))
     for label, out in (("MCAP log", args.mcap), ("Rerun recording", args.rrd)):
         if out:
             print(f"  {label}: {out}")

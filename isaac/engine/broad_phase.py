@@ -118,13 +118,12 @@ def find_pairs(
                 pair_a[count] = min(i, j)
                 pair_b[count] = max(i, j)
             count += 0 if skip else 1
-    if count > capacity:
-        return count
-    _sort_pairs(pair_a, pair_b, count, n, sweep_index[4], sweep_index[5], pair_spare)
+    if count <= capacity:
+        _sort_pairs(pair_a, pair_b, count, n, sweep_index[4], sweep_index[5], pair_spare)
     return count
 
 
-@numba.njit(cache=True, nogil=True)
+@numba.njit(cache=True, nogil=True, inline="always")
 def _sort_pairs(pair_a, pair_b, count, n, per, slot, sorted_b):
     """Sort pairs by (a, b): counting sort by a, then insertion sort of each a's few b's.
     per, slot: (n + 1,) and sorted_b: (count or more,) int64 scratch."""
@@ -164,7 +163,7 @@ def speculative_reach(velocity, angular_velocity, radius, look_ahead, extra, exp
         expand[i] = look_ahead * (speed + abs(angular_velocity[i]) * radius[i]) + extra
 
 
-@numba.njit(cache=True, nogil=True)
+@numba.njit(cache=True, nogil=True, inline="always")
 def _stable_order(key, order, spare):
     """The permutation that sorts key stably: the same as np.argsort(key, kind="mergesort"),
     with NumPy's order (NaN after every number). Runs of RUN elements are insertion-sorted,
@@ -212,7 +211,7 @@ def _stable_order(key, order, spare):
     return order
 
 
-@numba.njit(cache=True, nogil=True)
+@numba.njit(cache=True, nogil=True, inline="always")
 def _before(x, y):
     """x sorts strictly before y in NumPy's order (NaN after every number)."""
     return x < y or (y != y and x == x)

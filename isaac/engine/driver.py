@@ -18,13 +18,23 @@ from that step, so it is computed afresh from its starting state. Buffer sizes n
 result (tests compare a run that grew mid-batch with one sized generously from the start).
 Only the solver's table grows in place (`isaac.engine.solver.sequential` returns it).
 
-The helpers a step is made of (`before_impulses`, `after_impulses`, `carry_over`, ...) are
-inlined into the driver: as calls, each passed a dozen arrays and paid a reference-count update
-per array (head-on, balanced: 7.3 against 4.6 us a step, measured side by side).
+Reference counts. numba counts the references to an array with an atomic update (an NRT_incref
+and an NRT_decref, each some 10-20 ns here) whenever a function names an array and then calls
+another kernel while the name lives: a bundle's field read (`work.pair_a`), a tuple unpacked,
+an argument passed on. So the driver names every array once, at the top of a call, and calls
+the stage kernels with those names inside the loop; a bundle's field read inside the loop cost
+two updates a read, about 170 reads a sub-step, which was most of a small scene's step (head-on,
+2 bodies: 4.7 us a step before). The small helpers (`carry_over`, `keep_rows`, the copies) take
+bundles and call nothing, so numba drops their counts.
 
 Python crosses into these kernels with plain tuples of the bundles' fields (numba types a
 plain tuple through its fast path, a namedtuple through a slow one: 4.1 against 2.4 us for
-twelve arrays), and the kernels name them again on entry (`Bodies(*bodies)`, ...).
+twelve arrays).
+
+`run_steps_sequential_timed` and `run_steps_seed_timed` are the same drivers with a clock read
+(`isaac.engine.clock`) between the stages, adding each stage's time up in an array
+(`isaac run --profile`); compiled apart, so the plain drivers carry no clock read. The clock
+only reads the time: the timed drivers give the same bits.
 """
 
 from __future__ import annotations
@@ -36,6 +46,7 @@ import numpy as np
 
 from isaac.engine import kernel_cache  # noqa: F401  (first: keys the kernels' numba cache)
 from isaac.engine.broad_phase import find_pairs, speculative_reach
+from isaac.engine.clock import monotonic_ns
 from isaac.engine.geometry import transform
 from isaac.engine.integrate import (
     DIVERGED_ANGLE,
@@ -210,372 +221,185 @@ DIVERGED = 1  # a step diverged: it was undone, and `body`, `field` say where
 NEED_PAIRS = 2  # a step found more candidate pairs than the scratch holds: undone
 NEED_ROWS = 3  # a step made more contact rows than the batch holds: undone
 
-
-@numba.njit(cache=True, nogil=True, inline="always")
-def before_impulses(bodies, cfg, pose, work, carry, carried):
-    """Stages 1-4 of a sub-step (geometry, broad phase, narrow phase, push-out) and, under
-    semi-implicit Euler, gravity; returns (contact rows, candidate pairs found). When the pairs
-    do not fit the scratch nothing has moved yet (stages 1-3 only read the pose) and the rows
-    count is -1. The order is `isaac.engine.step.substep`'s."""
-    prev_key = carry.key[:carried]
-    prev_feature = carry.feature[:carried]
-    # 1. geometry
-    transform(
-        pose.position,
-        pose.angle,
-        pose.exists,
-        bodies.vertices_local,
-        bodies.normals_local,
-        bodies.vertex_count,
-        bodies.radius,
-        work.vertices,
-        work.normals,
-        work.aabb,
-    )
-    # 2. broad phase
-    speculative_reach(
-        pose.velocity,
-        pose.angular_velocity,
-        bodies.radius,
-        cfg.look_ahead,
-        cfg.gravity_reach,
-        work.expand,
-    )
-    pairs = find_pairs(
-        pose.position,
-        bodies.radius,
-        work.aabb,
-        work.expand,
-        bodies.movable,
-        pose.exists,
-        cfg.filtered,
-        bodies.category,
-        bodies.mask,
-        bodies.group,
-        bodies.no_collide,
-        work.pair_a,
-        work.pair_b,
-        work.pair_spare,
-        work.sweep_index,
-        work.sweep_key,
-        work.sweep_table,
-    )
-    if pairs > work.pair_a.shape[0]:
-        return -1, pairs
-    # 3. narrow phase (and which previous contact each row continues, for warm starting)
-    rows = collide_pairs(
-        work.pair_a,
-        work.pair_b,
-        pairs,
-        work.vertices,
-        work.normals,
-        bodies.vertex_count,
-        bodies.radius,
-        pose.velocity,
-        pose.angular_velocity,
-        cfg.look_ahead,
-        cfg.gravity_reach,
-        cfg.two_points,
-        cfg.hysteresis,
-        prev_key,
-        prev_feature,
-        work.a,
-        work.b,
-        work.feature,
-        work.slot,
-        work.point,
-        work.normal,
-        work.depth,
-        work.pair_depth,
-    )
-    match_previous(
-        rows,
-        work.a,
-        work.b,
-        work.feature,
-        work.slot,
-        pose.position.shape[0],
-        prev_key,
-        prev_feature,
-        carry.slot[:carried],
-        work.previous,
-    )
-    # 4. push-out
-    push_out(
-        rows,
-        work.a,
-        work.b,
-        work.feature,
-        work.slot,
-        work.point,
-        work.normal,
-        work.pair_depth,
-        bodies.inv_mass,
-        bodies.thickness,
-        pose.position,
-        cfg.correction_mode,
-        cfg.slop,
-        cfg.correction,
-        cfg.position_iterations,
-        work.push_a,
-        work.push_b,
-        work.push_start,
-    )
-    # 5. impulses come next; semi-implicit Euler puts gravity in first, so contacts see it
-    if not cfg.explicit:
-        add_gravity(pose.velocity, bodies.movable, pose.exists, cfg.gx, cfg.gy, cfg.h)
-    if work.joint_scratch.shape[0]:
-        prepare_joints(
-            Joints(*bodies.joints),
-            work.joint_scratch,
-            pose.position,
-            pose.angle,
-            pose.exists,
-            bodies.inv_mass,
-            bodies.inv_inertia,
-            cfg.h,
-            carry.joint,
-            cfg.warm_starting,
-        )
-    return rows, pairs
+# what the timed driver (`isaac run --profile`) adds up, in clock[1 + stage] (ns; clock[0]: the
+# whole call): the stages of `isaac.engine.step`, and the driver's own work (saving each step's
+# start to undo it, carrying contacts to the next sub-step, existence and the divergence check,
+# copying states and rows into the batch)
+STAGES = (
+    "geometry",
+    "broad phase",
+    "narrow phase",
+    "push-out",
+    "impulses",
+    "integration",
+    "driver",
+)
+GEOMETRY, BROAD_PHASE, NARROW_PHASE, PUSH_OUT, IMPULSES, INTEGRATION, DRIVER = range(len(STAGES))
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
-def after_impulses(bodies, cfg, pose, work):
-    """Stage 6 of a sub-step: integration (the seed's explicit Euler puts gravity last), then
-    the joints' position pass."""
-    advance_positions(
-        pose.position,
-        pose.angle,
-        pose.velocity,
-        pose.angular_velocity,
-        bodies.movable,
-        pose.exists,
-        cfg.h,
-    )
-    if cfg.explicit:
-        add_gravity(pose.velocity, bodies.movable, pose.exists, cfg.gx, cfg.gy, cfg.h)
-    if work.joint_scratch.shape[0]:
-        correct_joint_positions(
-            Joints(*bodies.joints),
-            pose.position,
-            pose.angle,
-            pose.exists,
-            bodies.inv_mass,
-            bodies.inv_inertia,
-            cfg.position_iterations,
-            work.joint_error,
-        )
+def _lap(clock, stage, since):
+    """Add the time since `since` (ns) to a stage's total; returns now."""
+    now = monotonic_ns()
+    clock[1 + stage] += now - since
+    return now
 
 
-@numba.njit(cache=True, nogil=True, inline="always")
-def _impulses_sequential(bodies, cfg, pose, work, carry, carried, rows, table):
-    """Stage 5 with the sequential solver; returns its table (grown if it had to)."""
-    return solve_sequential(
-        rows,
-        work.a,
-        work.b,
-        work.feature,
-        work.slot,
-        work.point,
-        work.normal,
-        work.depth,
-        work.previous,
-        pose.position,
-        pose.velocity,
-        pose.angular_velocity,
-        bodies.inv_mass,
-        bodies.inv_inertia,
-        cfg.gravity_dv,
-        bodies.restitution,
-        bodies.friction,
-        cfg.restitution_rule,
-        cfg.friction_rule,
-        cfg.restitution_threshold,
-        cfg.friction_on,
-        cfg.iterations,
-        cfg.warm_starting,
-        cfg.h,
-        carry.impulse[:carried],
-        carry.tangent[:carried],
-        work.impulse,
-        work.tangent,
-        work.restitution,
-        work.push_a,
-        work.push_b,
-        table,
-        bodies.joints,
-        work.joint_scratch,
-    )
+# The small helpers below take bundles as plain tuples and name their fields inside; they call
+# no other kernel and return in one place, so numba drops the reference counts of those names
+# (see the module docstring).
 
 
-@numba.njit(cache=True, nogil=True, inline="always")
-def _impulses_seed(bodies, cfg, pose, work, rows):
-    """Stage 5 with the seed's single pass."""
-    solve_seed(
-        rows,
-        work.a,
-        work.b,
-        work.feature,
-        work.slot,
-        work.point,
-        work.normal,
-        work.depth,
-        pose.position,
-        pose.velocity,
-        pose.angular_velocity,
-        bodies.inv_mass,
-        bodies.inv_inertia,
-        cfg.gravity_dv,
-        bodies.restitution,
-        bodies.friction,
-        cfg.restitution_rule,
-        cfg.friction_rule,
-        cfg.restitution_threshold,
-        cfg.friction_on,
-        cfg.h,
-        work.impulse,
-        work.tangent,
-        work.restitution,
-        work.push_a,
-        work.push_b,
-    )
-
-
-@numba.njit(cache=True, nogil=True, inline="always")
+@numba.njit(cache=True, nogil=True)
 def carry_over(work, rows, n, carry):
     """This sub-step's rows as the next one's Carry (it has the scratch's row capacity);
     returns the count. The key is `isaac.engine.step.ContactCache`'s: a * n + b."""
+    w = Scratch(*work)
+    c = Carry(*carry)
     for k in range(rows):
-        carry.key[k] = np.int64(work.a[k]) * n + work.b[k]
-        carry.feature[k] = work.feature[k]
-        carry.slot[k] = work.slot[k]
-        carry.impulse[k] = work.impulse[k]
-        carry.tangent[k] = work.tangent[k]
-    if work.joint_scratch.shape[0]:
-        keep_joint_impulses(work.joint_scratch, carry.joint)
+        c.key[k] = np.int64(w.a[k]) * n + w.b[k]
+        c.feature[k] = w.feature[k]
+        c.slot[k] = w.slot[k]
+        c.impulse[k] = w.impulse[k]
+        c.tangent[k] = w.tangent[k]
     return rows
 
 
-@numba.njit(cache=True, nogil=True, inline="always")
+@numba.njit(cache=True, nogil=True)
 def keep_rows(batch, at, work, rows, substep):
     """Append a sub-step's contact rows to the batch at row `at`; returns the new end, or -1
     (nothing written) when they do not fit."""
-    if at + rows > batch.a.shape[0]:
-        return -1
-    for k in range(rows):
+    b = Batch(*batch)
+    w = Scratch(*work)
+    fits = at + rows <= b.a.shape[0]  # (one exit: see carry_over)
+    for k in range(rows if fits else 0):
         q = at + k
-        batch.substep[q] = substep
-        batch.a[q] = work.a[k]
-        batch.b[q] = work.b[k]
-        batch.feature[q] = work.feature[k]
-        batch.slot[q] = work.slot[k]
-        batch.point[q, 0] = work.point[k, 0]
-        batch.point[q, 1] = work.point[k, 1]
-        batch.normal[q, 0] = work.normal[k, 0]
-        batch.normal[q, 1] = work.normal[k, 1]
-        batch.depth[q] = work.depth[k]
-        batch.pair_depth[q] = work.pair_depth[k]
-        batch.push_a[q, 0] = work.push_a[k, 0]
-        batch.push_a[q, 1] = work.push_a[k, 1]
-        batch.push_b[q, 0] = work.push_b[k, 0]
-        batch.push_b[q, 1] = work.push_b[k, 1]
-        batch.impulse[q] = work.impulse[k]
-        batch.tangent[q] = work.tangent[k]
-        batch.restitution[q] = work.restitution[k]
-    return at + rows
+        b.substep[q] = substep
+        b.a[q] = w.a[k]
+        b.b[q] = w.b[k]
+        b.feature[q] = w.feature[k]
+        b.slot[q] = w.slot[k]
+        b.point[q, 0] = w.point[k, 0]
+        b.point[q, 1] = w.point[k, 1]
+        b.normal[q, 0] = w.normal[k, 0]
+        b.normal[q, 1] = w.normal[k, 1]
+        b.depth[q] = w.depth[k]
+        b.pair_depth[q] = w.pair_depth[k]
+        b.push_a[q, 0] = w.push_a[k, 0]
+        b.push_a[q, 1] = w.push_a[k, 1]
+        b.push_b[q, 0] = w.push_b[k, 0]
+        b.push_b[q, 1] = w.push_b[k, 1]
+        b.impulse[q] = w.impulse[k]
+        b.tangent[q] = w.tangent[k]
+        b.restitution[q] = w.restitution[k]
+    return at + rows if fits else -1
 
 
-@numba.njit(cache=True, nogil=True, inline="always")
-def end_step(bodies, cfg, pose, step):
-    """After the sub-steps of the step that makes state `step`: existence from
-    time = step * dt (never a running sum), then the divergence check; returns (body, field)
-    of the first diverged body or (-1, -1) (`isaac.engine.integrate.first_diverged`)."""
-    if cfg.timed:
-        time = step * cfg.dt
-        for i in range(pose.exists.shape[0]):
-            pose.exists[i] = bodies.enters_at[i] <= time and time < bodies.leaves_at[i]
-    return first_diverged(
-        pose.position,
-        pose.angle,
-        pose.velocity,
-        pose.angular_velocity,
-        pose.exists,
-        DIVERGED_POSITION,
-        DIVERGED_SPEED,
-        DIVERGED_ANGLE,
-    )
+@numba.njit(cache=True, nogil=True)
+def _set_existence(enters_at, leaves_at, exists, time):
+    """Which bodies exist at `time` (s): enters_at <= time < leaves_at."""
+    for i in range(exists.shape[0]):
+        exists[i] = enters_at[i] <= time and time < leaves_at[i]
 
 
 # (element loops, not slice assignments: numba's broadcasting setitem made these few lines
 # cost 12 s of LLVM time to compile)
-@numba.njit(cache=True, nogil=True, inline="always")
+@numba.njit(cache=True, nogil=True)
 def _keep_state(batch, s, pose, at):
-    for i in range(pose.position.shape[0]):
-        batch.position[s, i, 0] = pose.position[i, 0]
-        batch.position[s, i, 1] = pose.position[i, 1]
-        batch.angle[s, i] = pose.angle[i]
-        batch.velocity[s, i, 0] = pose.velocity[i, 0]
-        batch.velocity[s, i, 1] = pose.velocity[i, 1]
-        batch.angular_velocity[s, i] = pose.angular_velocity[i]
-        batch.exists[s, i] = pose.exists[i]
-    batch.offsets[s + 1] = at
+    b = Batch(*batch)
+    p = Pose(*pose)
+    for i in range(p.position.shape[0]):
+        b.position[s, i, 0] = p.position[i, 0]
+        b.position[s, i, 1] = p.position[i, 1]
+        b.angle[s, i] = p.angle[i]
+        b.velocity[s, i, 0] = p.velocity[i, 0]
+        b.velocity[s, i, 1] = p.velocity[i, 1]
+        b.angular_velocity[s, i] = p.angular_velocity[i]
+        b.exists[s, i] = p.exists[i]
+    b.offsets[s + 1] = at
 
 
-@numba.njit(cache=True, nogil=True, inline="always")
-def _keep_joints(batch, s, bodies, pose, work):
+@numba.njit(cache=True, nogil=True)
+def _keep_joints(batch, s, joints, pose, jt, error):
+    b = Batch(*batch)
+    p = Pose(*pose)
     write_joint_rows(
-        Joints(*bodies.joints),
-        work.joint_scratch,
-        pose.position,
-        pose.angle,
-        pose.exists,
-        work.joint_error,
-        batch.joint_anchor_a[s],
-        batch.joint_anchor_b[s],
-        batch.joint_linear[s],
-        batch.joint_angular[s],
-        batch.joint_motor[s],
-        batch.joint_limit[s],
-        batch.joint_impulses[s],
-        batch.joint_error[s],
+        joints,
+        jt,
+        p.position,
+        p.angle,
+        p.exists,
+        error,
+        b.joint_anchor_a[s],
+        b.joint_anchor_b[s],
+        b.joint_linear[s],
+        b.joint_angular[s],
+        b.joint_motor[s],
+        b.joint_limit[s],
+        b.joint_impulses[s],
+        b.joint_error[s],
     )
 
 
-@numba.njit(cache=True, nogil=True, inline="always")
+@numba.njit(cache=True, nogil=True)
 def _copy_pose(pose, into):
-    for i in range(pose.position.shape[0]):
-        into.position[i, 0] = pose.position[i, 0]
-        into.position[i, 1] = pose.position[i, 1]
-        into.angle[i] = pose.angle[i]
-        into.velocity[i, 0] = pose.velocity[i, 0]
-        into.velocity[i, 1] = pose.velocity[i, 1]
-        into.angular_velocity[i] = pose.angular_velocity[i]
-        into.exists[i] = pose.exists[i]
+    p = Pose(*pose)
+    q = Pose(*into)
+    for i in range(p.position.shape[0]):
+        q.position[i, 0] = p.position[i, 0]
+        q.position[i, 1] = p.position[i, 1]
+        q.angle[i] = p.angle[i]
+        q.velocity[i, 0] = p.velocity[i, 0]
+        q.velocity[i, 1] = p.velocity[i, 1]
+        q.angular_velocity[i] = p.angular_velocity[i]
+        q.exists[i] = p.exists[i]
 
 
-@numba.njit(cache=True, nogil=True, inline="always")
+@numba.njit(cache=True, nogil=True)
 def _copy_carry(carry, into, count):
+    c = Carry(*carry)
+    d = Carry(*into)
     for k in range(count):
-        into.key[k] = carry.key[k]
-        into.feature[k] = carry.feature[k]
-        into.slot[k] = carry.slot[k]
-        into.impulse[k] = carry.impulse[k]
-        into.tangent[k] = carry.tangent[k]
-    for k in range(carry.joint.shape[0]):
-        for c in range(carry.joint.shape[1]):
-            into.joint[k, c] = carry.joint[k, c]
+        d.key[k] = c.key[k]
+        d.feature[k] = c.feature[k]
+        d.slot[k] = c.slot[k]
+        d.impulse[k] = c.impulse[k]
+        d.tangent[k] = c.tangent[k]
+    for k in range(c.joint.shape[0]):
+        for m in range(c.joint.shape[1]):
+            d.joint[k, m] = c.joint[k, m]
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
 def _run_steps(
-    seed, bodies, cfg, pose, work, carry, saved_pose, saved_carry, batch, table, start, carried,
-    first, k, record,
+    seed, timed, bodies, cfg, pose, work, carry, saved_pose, saved_carry, batch, table, start,
+    carried, first, k, record, clock,
 ):  # fmt: skip
-    """The body of both drivers (inlined into each, so that the constant `seed` prunes the
-    solver a driver does not use before numba compiles it)."""
-    n = pose.position.shape[0]
-    at = batch.offsets[start] if record else 0
+    """The body of every driver (inlined into each, so that the constants `seed` and `timed`
+    prune the solver a driver does not use, and the clock reads of an untimed one, before
+    numba compiles it). The sub-step is `isaac.engine.step.substep`'s, stage for stage."""
+    began = monotonic_ns() if timed else 0
+    lap = began
+    # every array a stage takes is named here, once a call, never inside the loop (a bundle's
+    # field read there costs two atomic reference-count updates a read; see the module docstring)
+    (
+        vertices_local, normals_local, vertex_count, radius, thickness, inv_mass, inv_inertia,
+        restitution, friction, movable, enters_at, leaves_at, category, mask, group, no_collide,
+        joint_fields,
+    ) = bodies  # fmt: skip
+    position, angle, velocity, angular_velocity, exists = pose
+    (
+        vertices, normals, aabb, expand, pair_a, pair_b, pair_spare, sweep_index, sweep_key,
+        sweep_table, push_start, c_a, c_b, c_feature, c_slot, c_point, c_normal, c_depth,
+        c_pair_depth, c_previous, push_a, push_b, c_impulse, c_tangent, c_restitution,
+        joint_scratch, joint_error,
+    ) = work  # fmt: skip
+    prev_key, prev_feature, prev_slot, prev_impulse, prev_tangent, joint_carry = carry
+    joints = Joints(*joint_fields)
+    gravity_dv = cfg.gravity_dv
+    n = position.shape[0]
+    n_joints = joint_scratch.shape[0]
+    at = Batch(*batch).offsets[start] if record else 0
     last_carried = carried
     for s in range(k):
         _copy_pose(pose, saved_pose)
@@ -583,18 +407,102 @@ def _run_steps(
         step_carried = carried
         need = 0
         status = DONE
+        if timed:
+            lap = _lap(clock, DRIVER, lap)
         for index in range(cfg.substeps):
-            rows, pairs = before_impulses(bodies, cfg, pose, work, carry, carried)
-            if rows < 0:
+            # 1. geometry
+            transform(
+                position, angle, exists, vertices_local, normals_local, vertex_count, radius,
+                vertices, normals, aabb,
+            )  # fmt: skip
+            if timed:
+                lap = _lap(clock, GEOMETRY, lap)
+            # 2. broad phase (when the pairs do not fit the scratch nothing has moved yet)
+            speculative_reach(
+                velocity, angular_velocity, radius, cfg.look_ahead, cfg.gravity_reach, expand
+            )
+            pairs = find_pairs(
+                position, radius, aabb, expand, movable, exists, cfg.filtered, category, mask,
+                group, no_collide, pair_a, pair_b, pair_spare, sweep_index, sweep_key,
+                sweep_table,
+            )  # fmt: skip
+            if timed:
+                lap = _lap(clock, BROAD_PHASE, lap)
+            if pairs > pair_a.shape[0]:
                 status = NEED_PAIRS
                 need = pairs
                 break
-            if seed:
-                _impulses_seed(bodies, cfg, pose, work, rows)
-            else:
-                table = _impulses_sequential(bodies, cfg, pose, work, carry, carried, rows, table)
-            after_impulses(bodies, cfg, pose, work)
+            # 3. narrow phase (and which previous contact each row continues, for warm
+            # starting); 4. push-out. (Not called without pairs, or rows: they would do
+            # nothing, and a call costs the reference counts of its arrays.)
+            rows = 0
+            if pairs > 0:
+                rows = collide_pairs(
+                    pair_a, pair_b, pairs, vertices, normals, vertex_count, radius, velocity,
+                    angular_velocity, cfg.look_ahead, cfg.gravity_reach, cfg.two_points,
+                    cfg.hysteresis, prev_key[:carried], prev_feature[:carried], c_a, c_b,
+                    c_feature, c_slot, c_point, c_normal, c_depth, c_pair_depth,
+                )  # fmt: skip
+            if rows > 0:
+                match_previous(
+                    rows, c_a, c_b, c_feature, c_slot, n, prev_key[:carried],
+                    prev_feature[:carried], prev_slot[:carried], c_previous,
+                )  # fmt: skip
+            if timed:
+                lap = _lap(clock, NARROW_PHASE, lap)
+            if rows > 0:
+                push_out(
+                    rows, c_a, c_b, c_feature, c_slot, c_point, c_normal, c_pair_depth, inv_mass,
+                    thickness, position, cfg.correction_mode, cfg.slop, cfg.correction,
+                    cfg.position_iterations, push_a, push_b, push_start,
+                )  # fmt: skip
+            if timed:
+                lap = _lap(clock, PUSH_OUT, lap)
+            # 5. impulses (semi-implicit Euler: gravity first, so contacts see it), with the
+            # joints
+            if not cfg.explicit:
+                add_gravity(velocity, movable, exists, cfg.gx, cfg.gy, cfg.h)
+            if n_joints:
+                prepare_joints(
+                    joints, joint_scratch, position, angle, exists, inv_mass, inv_inertia, cfg.h,
+                    joint_carry, cfg.warm_starting,
+                )  # fmt: skip
+            if seed and rows > 0:  # (without rows both solvers return at once)
+                solve_seed(
+                    rows, c_a, c_b, c_feature, c_slot, c_point, c_normal, c_depth, position,
+                    velocity, angular_velocity, inv_mass, inv_inertia, gravity_dv, restitution,
+                    friction, cfg.restitution_rule, cfg.friction_rule,
+                    cfg.restitution_threshold, cfg.friction_on, cfg.h, c_impulse, c_tangent,
+                    c_restitution, push_a, push_b,
+                )  # fmt: skip
+            elif not seed and (rows > 0 or n_joints > 0):
+                # (the previous impulses whole: rows name their previous row by index)
+                table = solve_sequential(
+                    rows, c_a, c_b, c_feature, c_slot, c_point, c_normal, c_depth, c_previous,
+                    position, velocity, angular_velocity, inv_mass, inv_inertia, gravity_dv,
+                    restitution, friction, cfg.restitution_rule, cfg.friction_rule,
+                    cfg.restitution_threshold, cfg.friction_on, cfg.iterations,
+                    cfg.warm_starting, cfg.h, prev_impulse, prev_tangent, c_impulse, c_tangent,
+                    c_restitution, push_a, push_b, table, joint_fields, joint_scratch,
+                )  # fmt: skip
+            if timed:
+                lap = _lap(clock, IMPULSES, lap)
+            # 6. integration (the seed's explicit Euler: gravity last), then the joints'
+            # position pass
+            advance_positions(position, angle, velocity, angular_velocity, movable, exists, cfg.h)
+            if cfg.explicit:
+                add_gravity(velocity, movable, exists, cfg.gx, cfg.gy, cfg.h)
+            if n_joints:
+                correct_joint_positions(
+                    joints, position, angle, exists, inv_mass, inv_inertia,
+                    cfg.position_iterations, joint_error,
+                )  # fmt: skip
+            if timed:
+                lap = _lap(clock, INTEGRATION, lap)
+            # this sub-step's contacts are what the next one reads
             carried = carry_over(work, rows, n, carry)
+            if n_joints:
+                keep_joint_impulses(joint_scratch, joint_carry)
             if record:
                 end = keep_rows(batch, at, work, rows, index)
                 if end < 0:
@@ -602,56 +510,96 @@ def _run_steps(
                     need = at + rows
                     break
                 at = end
+            if timed:
+                lap = _lap(clock, DRIVER, lap)
         body = -1
         field = -1
         if status == DONE:
-            body, field = end_step(bodies, cfg, pose, first + s + 1)
+            # existence from time = step * dt (never a running sum), then the divergence check
+            if cfg.timed:
+                _set_existence(enters_at, leaves_at, exists, (first + s + 1) * cfg.dt)
+            body, field = first_diverged(
+                position, angle, velocity, angular_velocity, exists, DIVERGED_POSITION,
+                DIVERGED_SPEED, DIVERGED_ANGLE,
+            )  # fmt: skip
             if body >= 0:
                 status = DIVERGED
         if status != DONE:
             _copy_pose(saved_pose, pose)
             _copy_carry(saved_carry, carry, step_carried)
+            if timed:
+                lap = _lap(clock, DRIVER, lap)
+                clock[0] += lap - began
             return status, s, step_carried, body, field, need, table, step_carried
         if record:
             _keep_state(batch, start + s, pose, at)
-            if work.joint_scratch.shape[0]:
-                _keep_joints(batch, start + s, bodies, pose, work)
+            if n_joints:
+                _keep_joints(batch, start + s, joints, pose, joint_scratch, joint_error)
         last_carried = step_carried
+        if timed:
+            lap = _lap(clock, DRIVER, lap)
+    if timed:
+        clock[0] += monotonic_ns() - began
     return DONE, k, carried, -1, -1, 0, table, last_carried
 
 
 @numba.njit(cache=True, nogil=True)
 def run_steps_sequential(
     bodies, cfg, pose, work, carry, saved_pose, saved_carry, batch, table, start, carried, first,
-    k, record,
+    k, record, clock,
 ):  # fmt: skip
     """Advance the pose by up to k steps from state index `first` with the sequential solver,
     writing the batch from index `start` when `record`.
 
     Every bundle arrives as a plain tuple of its fields (`Bodies`, `Settings`, `Pose`, `Scratch`,
     `Carry`, `Pose` and `Carry` of the same sizes for undoing a step, `Batch`); table: the
-    solver's table; carried: how many Carry rows are valid. Returns (status, steps taken,
-    carried, body, field, pairs or rows needed, table, carried at the start of the last step):
-    status DONE, or DIVERGED / NEED_PAIRS / NEED_ROWS with the step that did it undone (body,
-    field: `first_diverged`'s). On return `saved_pose` / `saved_carry` hold the start of the
-    last step taken (or undone), which `Stepper.redo_last` computes again to record it."""
+    solver's table; carried: how many Carry rows are valid; clock: (1 + len(STAGES),) int64,
+    which only the timed drivers write. Returns (status, steps taken, carried, body, field,
+    pairs or rows needed, table, carried at the start of the last step): status DONE, or
+    DIVERGED / NEED_PAIRS / NEED_ROWS with the step that did it undone (body, field:
+    `first_diverged`'s). On return `saved_pose` / `saved_carry` hold the start of the last step
+    taken (or undone), which `Stepper.redo_last` computes again to record it."""
     return _run_steps(
-        False, Bodies(*bodies), Settings(*cfg), Pose(*pose), Scratch(*work), Carry(*carry),
-        Pose(*saved_pose), Carry(*saved_carry), Batch(*batch), table, start, carried, first, k,
-        record,
+        False, False, bodies, Settings(*cfg), pose, work, carry, saved_pose, saved_carry, batch,
+        table, start, carried, first, k, record, clock,
     )  # fmt: skip
 
 
 @numba.njit(cache=True, nogil=True)
 def run_steps_seed(
     bodies, cfg, pose, work, carry, saved_pose, saved_carry, batch, table, start, carried, first,
-    k, record,
+    k, record, clock,
 ):  # fmt: skip
     """`run_steps_sequential` with the seed's single-pass solver."""
     return _run_steps(
-        True, Bodies(*bodies), Settings(*cfg), Pose(*pose), Scratch(*work), Carry(*carry),
-        Pose(*saved_pose), Carry(*saved_carry), Batch(*batch), table, start, carried, first, k,
-        record,
+        True, False, bodies, Settings(*cfg), pose, work, carry, saved_pose, saved_carry, batch,
+        table, start, carried, first, k, record, clock,
+    )  # fmt: skip
+
+
+@numba.njit(cache=True, nogil=True)
+def run_steps_sequential_timed(
+    bodies, cfg, pose, work, carry, saved_pose, saved_carry, batch, table, start, carried, first,
+    k, record, clock,
+):  # fmt: skip
+    """`run_steps_sequential` that also adds each stage's time to `clock` (ns: clock[0] the
+    whole call, clock[1 + i] stage STAGES[i]); the same bits."""
+    return _run_steps(
+        False, True, bodies, Settings(*cfg), pose, work, carry, saved_pose, saved_carry, batch,
+        table, start, carried, first, k, record, clock,
+    )  # fmt: skip
+
+
+@numba.njit(cache=True, nogil=True)
+def run_steps_seed_timed(
+    bodies, cfg, pose, work, carry, saved_pose, saved_carry, batch, table, start, carried, first,
+    k, record, clock,
+):  # fmt: skip
+    """`run_steps_seed` that also adds each stage's time to `clock`, as
+    `run_steps_sequential_timed` does."""
+    return _run_steps(
+        True, True, bodies, Settings(*cfg), pose, work, carry, saved_pose, saved_carry, batch,
+        table, start, carried, first, k, record, clock,
     )  # fmt: skip
 
 
@@ -660,9 +608,10 @@ class Stepper:
     that grows a buffer and calls again when a step did not fit (Python, once per call or
     growth, never per stage)."""
 
-    def __init__(self, model, settings, dt: float, work) -> None:
+    def __init__(self, model, settings, dt: float, work, *, timed: bool = False) -> None:
         """model: `isaac.engine.world.Model`; settings: `isaac.engine.step.StepSettings`;
-        dt: the step (s); work: the simulation's `isaac.engine.step.Workspace`."""
+        dt: the step (s); work: the simulation's `isaac.engine.step.Workspace`; timed: call the
+        timed driver, which adds each stage's time up (`stage_seconds`)."""
         self.n = model.n_bodies
         self.work = work
         self.bodies = tuple(
@@ -699,7 +648,11 @@ class Stepper:
                 bool(model.filtered),
             )
         )  # fmt: skip
-        self.kernel = run_steps_seed if s.seed_solver else run_steps_sequential
+        if timed:
+            self.kernel = run_steps_seed_timed if s.seed_solver else run_steps_sequential_timed
+        else:
+            self.kernel = run_steps_seed if s.seed_solver else run_steps_sequential
+        self.clock = np.zeros(1 + len(STAGES), dtype=np.int64)  # ns (the timed driver's)
         self.substeps = int(s.substeps)
         self._sized_for = -1
         self.carried = 0
@@ -805,14 +758,23 @@ class Stepper:
                     self._rows_per_step = max(4, -(-int(at) // taken))
                 return taken, body, field, batch if record else None
 
-    def _call(self, pose, carry, saved, batch, start, carried, first, k, record) -> tuple:
+    def stage_seconds(self) -> dict[str, float]:
+        """Seconds the timed driver spent in each of STAGES, and in all its calls ("total"),
+        since this stepper was made (zeros when it is not timed)."""
+        seconds = {stage: 1e-9 * int(self.clock[1 + i]) for i, stage in enumerate(STAGES)}
+        seconds["total"] = 1e-9 * int(self.clock[0])
+        return seconds
+
+    def _call(self, pose, carry, saved, batch, start, carried, first, k, record, clock=None):
         """One call of the compiled driver with this stepper's bundles (`run_steps_sequential`
-        says what each argument is; saved: the (pose, carry) to undo a step with), keeping the
-        solver table it hands back. Returns (status, steps taken, carried, body, field, needed,
-        carried at the start of the last step)."""
+        says what each argument is; saved: the (pose, carry) to undo a step with; clock: where
+        a timed driver adds its times, by default this stepper's), keeping the solver table it
+        hands back. Returns (status, steps taken, carried, body, field, needed, carried at the
+        start of the last step)."""
         status, done, carried, body, field, need, table, last_carried = self.kernel(
             self.bodies, self.settings, pose, self.scratch, carry, saved[0], saved[1], batch,
             self.work.solver_table, start, carried, first, k, record,
+            self.clock if clock is None else clock,
         )  # fmt: skip
         self.work.solver_table = table
         return status, done, carried, body, field, need, last_carried
@@ -833,8 +795,9 @@ class Stepper:
         batch = self.new_batch(1)
         while True:
             status, _, _, _, _, need, _ = self._call(
-                pose, carry, (spare_pose, spare_carry), batch, 0, carried, first, 1, True
-            )
+                pose, carry, (spare_pose, spare_carry), batch, 0, carried, first, 1, True,
+                np.zeros_like(self.clock),  # (a step taken again is not the run's time)
+            )  # fmt: skip
             if status == NEED_ROWS:
                 batch = _grown_rows(batch, need)
                 continue

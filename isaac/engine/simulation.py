@@ -7,7 +7,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from isaac.engine.driver import Stepper
+from isaac.engine.driver import STAGES, Stepper
 from isaac.engine.integrate import DIVERGED_ANGLE, DIVERGED_POSITION, DIVERGED_SPEED, diverged_body
 from isaac.engine.joints import JOINT_IMPULSES
 from isaac.engine.records import (
@@ -51,12 +51,16 @@ class Simulation:
         start: StepRecord | None = None,
         compile_ahead: bool = True,
         staged: bool = False,
+        profile: bool = False,
     ) -> None:
         """compile_ahead: on a machine whose numba cache lacks the solver, compile the step's
         kernels in two processes at once before the first step (`isaac.engine.compile_ahead`).
         staged: never use the compiled driver (`isaac.engine.driver`): `run`, `advance` and
         `batches` then step through `isaac.engine.step.step` too, one compiled call per stage
-        from Python (what `isaac run --profile` times). Both give the same bits.
+        from Python. Both give the same bits.
+        profile: `run`, `advance` and `batches` call the timed driver, which adds up the time
+        of each stage inside compiled code (`stage_times`; `isaac run --profile`); the same
+        bits. Compiled apart from the plain driver, on first use. (`step()` is not timed.)
 
         `step()` always takes the staged path: for one step it is the cheaper one (the driver
         pays for crossing its bundles into compiled code once per call).
@@ -66,7 +70,9 @@ class Simulation:
         self.settings = StepSettings.of(scene.world)
         self._work = Workspace(self.model)
         self._stepper = (
-            None if staged else Stepper(self.model, self.settings, scene.world.dt, self._work)
+            None
+            if staged
+            else Stepper(self.model, self.settings, scene.world.dt, self._work, timed=bool(profile))
         )
         self.state: State = initial_state(scene, self.model)
         self._contacts = Contacts.empty()
@@ -112,6 +118,17 @@ class Simulation:
             self._stepper.set_carry(self._cache)
             self._carry_in_stepper = True
         return self._stepper.run(self.state, steps, batch)
+
+    def stage_times(self) -> dict[str, float]:
+        """Seconds spent in each stage of the step inside the timed driver (`profile=True`),
+        over every call so far: geometry, broad phase, narrow phase, push-out, impulses,
+        integration, and "driver" (its own bookkeeping: undo copies, carried contacts, the
+        divergence check, batch rows); "total" is the whole of those calls, of which the
+        stages are disjoint parts (the rest: the clock reads themselves). Zeros when not
+        profiling or on the staged path."""
+        if self._stepper is None:
+            return dict.fromkeys((*STAGES, "total"), 0.0)
+        return self._stepper.stage_seconds()
 
     @property
     def n_bodies(self) -> int:
