@@ -26,7 +26,7 @@ SWEEP_INDEX_ROWS = 6  # live, order, spare, body, per, slot (find_pairs scratch)
 RUN = 16  # _stable_order insertion-sorts runs of this many elements before merging
 
 
-@numba.njit(cache=True, nogil=True)
+@numba.njit(cache=True, nogil=True, _nrt=False)  # (no reference counts: see driver)
 def find_pairs(
     position, radius, aabb, expand, movable, exists, filtered, category, mask, group, no_collide,
     pair_a, pair_b, pair_spare, sweep_index, sweep_key, sweep_table,
@@ -154,7 +154,7 @@ def _sort_pairs(pair_a, pair_b, count, n, per, slot, sorted_b):
             pair_b[k] = sorted_b[k]
 
 
-@numba.njit(cache=True, nogil=True)
+@numba.njit(cache=True, nogil=True, _nrt=False)  # (no reference counts: see driver)
 def speculative_reach(velocity, angular_velocity, radius, look_ahead, extra, expand):
     """How far (m) each body can travel in `look_ahead` seconds: h (|v| + |w| r) + extra."""
     for i in range(velocity.shape[0]):

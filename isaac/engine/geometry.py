@@ -17,7 +17,7 @@ sin_cos = numba.njit(cache=True, nogil=True)(trig.sin_cos)
 _sin_cos_inlined = numba.njit(cache=True, nogil=True, inline="always")(trig.sin_cos)
 
 
-@numba.njit(cache=True, nogil=True)
+@numba.njit(cache=True, nogil=True, _nrt=False)  # (no reference counts: see driver)
 def transform(
     position, angle, exists, vertices_local, normals_local, vertex_count, radius, vertices,
     normals, aabb,

@@ -25,7 +25,7 @@ PI = np.pi
 TWO_PI = 2.0 * np.pi
 
 
-@numba.njit(cache=True, nogil=True)
+@numba.njit(cache=True, nogil=True, _nrt=False)  # (no reference counts: see driver)
 def add_gravity(velocity, movable, exists, gx, gy, h):
     """v += g h (m/s) for every existing movable body."""
     for i in range(velocity.shape[0]):
@@ -34,7 +34,7 @@ def add_gravity(velocity, movable, exists, gx, gy, h):
             velocity[i, 1] += gy * h
 
 
-@numba.njit(cache=True, nogil=True)
+@numba.njit(cache=True, nogil=True, _nrt=False)  # (no reference counts: see driver)
 def advance_positions(position, angle, velocity, angular_velocity, movable, exists, h):
     """x += v h (m); angle += w h (rad), wrapped into [-pi, pi]."""
     for i in range(position.shape[0]):
@@ -70,7 +70,7 @@ def diverged_body(state) -> tuple[int, int]:
     )
 
 
-@numba.njit(cache=True, nogil=True)
+@numba.njit(cache=True, nogil=True, _nrt=False)  # (no reference counts: see driver)
 def first_diverged(
     position, angle, velocity, angular_velocity, exists, position_limit, speed_limit, angle_limit
 ):

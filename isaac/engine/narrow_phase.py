@@ -114,7 +114,7 @@ def _emit(
     c_pair_depth[row] = pair_depth
 
 
-@numba.njit(cache=True, nogil=True)
+@numba.njit(cache=True, nogil=True, _nrt=False)  # (no reference counts: see driver)
 def collide_pairs(
     pair_a,
     pair_b,
@@ -422,7 +422,7 @@ def collide_pairs(
     return rows
 
 
-@numba.njit(cache=True, nogil=True)
+@numba.njit(cache=True, nogil=True, _nrt=False)  # (no reference counts: see driver)
 def match_previous(
     rows, c_a, c_b, c_feature, c_slot, n, prev_key, prev_feature, prev_slot, c_previous
 ):

@@ -25,7 +25,7 @@ NONE = 2
 SLOP_SHARE = 0.05
 
 
-@numba.njit(cache=True, nogil=True)
+@numba.njit(cache=True, nogil=True, _nrt=False)  # (no reference counts: see driver)
 def push_out(
     rows,
     c_a,
@@ -56,59 +56,58 @@ def push_out(
     and moves every row's point with its incident body (feature // 4096 == 0: the reference face
     is a's, the point is on b). start: (n, 2) scratch (the positions before the pushes).
     """
-    # (one exit, no early return: numba keeps the reference counts of a kernel's arrays when
-    # it has two, an atomic update each per call)
-    if rows > 0:
-        for i in range(position.shape[0]):
-            start[i, 0] = position[i, 0]
-            start[i, 1] = position[i, 1]
+    if rows == 0:
+        return
+    for i in range(position.shape[0]):
+        start[i, 0] = position[i, 0]
+        start[i, 1] = position[i, 1]
+    for k in range(rows):
+        c_push_a[k, 0] = 0.0
+        c_push_a[k, 1] = 0.0
+        c_push_b[k, 0] = 0.0
+        c_push_b[k, 1] = 0.0
+    for _ in range(iterations):
         for k in range(rows):
-            c_push_a[k, 0] = 0.0
-            c_push_a[k, 1] = 0.0
-            c_push_b[k, 0] = 0.0
-            c_push_b[k, 1] = 0.0
-        for _ in range(iterations):
-            for k in range(rows):
-                if c_slot[k] != 0:
-                    continue
-                a = c_a[k]
-                b = c_b[k]
-                w = inv_mass[a] + inv_mass[b]
-                if w <= 0.0:
-                    continue
-                nx = c_normal[k, 0]
-                ny = c_normal[k, 1]
-                moved = (position[b, 0] - start[b, 0] - position[a, 0] + start[a, 0]) * nx + (
-                    position[b, 1] - start[b, 1] - position[a, 1] + start[a, 1]
-                ) * ny
-                d = c_pair_depth[k] - moved
-                if mode == PARTIAL:
-                    # the slop never exceeds a small share of the thinner body (a 1 mm body or a
-                    # 1 cm sliver must not be left half-sunk by a 5 mm slop)
-                    pair_slop = min(slop, SLOP_SHARE * min(thickness[a], thickness[b]))
-                    d = correction * (d - pair_slop)
-                elif mode == NONE:
-                    d = 0.0
-                if d <= 0.0:
-                    continue
-                share_a = d * inv_mass[a] / w
-                share_b = d * inv_mass[b] / w
-                position[a, 0] -= nx * share_a
-                position[a, 1] -= ny * share_a
-                position[b, 0] += nx * share_b
-                position[b, 1] += ny * share_b
-                c_push_a[k, 0] -= nx * share_a
-                c_push_a[k, 1] -= ny * share_a
-                c_push_b[k, 0] += nx * share_b
-                c_push_b[k, 1] += ny * share_b
-        # the points belong to the incident body (b when a's face is the reference)
-        first = 0
-        for k in range(rows):
-            if c_slot[k] == 0:
-                first = k
-            if c_feature[k] // 4096 == 0:
-                c_point[k, 0] += c_push_b[first, 0]
-                c_point[k, 1] += c_push_b[first, 1]
-            else:
-                c_point[k, 0] += c_push_a[first, 0]
-                c_point[k, 1] += c_push_a[first, 1]
+            if c_slot[k] != 0:
+                continue
+            a = c_a[k]
+            b = c_b[k]
+            w = inv_mass[a] + inv_mass[b]
+            if w <= 0.0:
+                continue
+            nx = c_normal[k, 0]
+            ny = c_normal[k, 1]
+            moved = (position[b, 0] - start[b, 0] - position[a, 0] + start[a, 0]) * nx + (
+                position[b, 1] - start[b, 1] - position[a, 1] + start[a, 1]
+            ) * ny
+            d = c_pair_depth[k] - moved
+            if mode == PARTIAL:
+                # the slop never exceeds a small share of the thinner body (a 1 mm body or a
+                # 1 cm sliver must not be left half-sunk by a 5 mm slop)
+                pair_slop = min(slop, SLOP_SHARE * min(thickness[a], thickness[b]))
+                d = correction * (d - pair_slop)
+            elif mode == NONE:
+                d = 0.0
+            if d <= 0.0:
+                continue
+            share_a = d * inv_mass[a] / w
+            share_b = d * inv_mass[b] / w
+            position[a, 0] -= nx * share_a
+            position[a, 1] -= ny * share_a
+            position[b, 0] += nx * share_b
+            position[b, 1] += ny * share_b
+            c_push_a[k, 0] -= nx * share_a
+            c_push_a[k, 1] -= ny * share_a
+            c_push_b[k, 0] += nx * share_b
+            c_push_b[k, 1] += ny * share_b
+    # the points belong to the incident body (b when a's face is the reference)
+    first = 0
+    for k in range(rows):
+        if c_slot[k] == 0:
+            first = k
+        if c_feature[k] // 4096 == 0:
+            c_point[k, 0] += c_push_b[first, 0]
+            c_point[k, 1] += c_push_b[first, 1]
+        else:
+            c_point[k, 0] += c_push_a[first, 0]
+            c_point[k, 1] += c_push_a[first, 1]

@@ -39,6 +39,7 @@ from isaac.engine.narrow_phase import collide_pairs, match_previous
 from isaac.engine.push_out import FULL, NONE, PARTIAL, push_out
 from isaac.engine.records import Contacts, JointRows
 from isaac.engine.solver import RULE_CODES, solve_contacts
+from isaac.engine.solver.schedule import GROUP_WIDTH, LANES
 from isaac.engine.world import Model, State
 from isaac.scene import WorldSettings
 
@@ -122,7 +123,10 @@ class Workspace:
         self.sweep_key = np.zeros(n)
         self.sweep_table = np.zeros((n, 8))
         self.push_start = np.zeros((n, 2))
-        self.solver_table = np.zeros(0)  # the impulse solver's scratch, grown as it needs
+        # the impulse solver's scratch, grown as it needs; made here with room for a few groups
+        # (twice what they need, as the solver grows it), so that the first contact of a run
+        # does not pay for it (head-on: 5-7 us in that step)
+        self.solver_table = np.zeros(2 * (GROUP_WIDTH * min(n, 8) + 3 * LANES))
         m = model.joints.kind.shape[0]
         self.joint_scratch = np.zeros((m, JOINT_WIDTH))  # isaac.engine.joints' rows
         self.joint_error = np.zeros((m, 2))  # what the position pass left (m, rad)
