@@ -77,7 +77,7 @@ def register(subparsers) -> None:
 
 def cmd_tradeoff(args: argparse.Namespace) -> int:
     scene = load_scene(args.scene)
-    grid = parse_grid(args.grid, scene.world.dt)
+    grid = parse_grid(args.grid, scene.world.dt, joints=bool(scene.joints))
     reference = args.reference or ("analytic" if scene.analytic else "accurate")
     result = measure(
         scene,
