@@ -402,3 +402,29 @@ def test_the_seed_solver_on_a_scene_with_joints_is_refused_in_one_line(capsys):
     assert status == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "--grid seed" in err[0] and "sequential solver" in err[0]
+
+
+@pytest.mark.parametrize("prefilter", [True, False], ids=["bounding boxes first", "every path"])
+def test_a_sweep_counts_a_shot_through_a_concrete_disc_beside_a_wall(prefilter, monkeypatch):
+    # the sweep's metric shares the tradeoff's clipping: a concrete disc and a concrete wall,
+    # one bullet through both, one over the wall and past the disc
+    from isaac.app.sweep import metrics
+
+    sc = scene(
+        _disc("post", 0.05, concrete=True),
+        box("wall", 0.05, 4.0, position=(5.0, 0.0), concrete=True),
+        box("through", 0.1, 0.1, position=(-0.5, 0.0), velocity=(200.0, 0.0)),
+        box("over", 0.1, 0.1, position=(-0.5, 3.0), velocity=(200.0, 0.0)),
+        preset="balanced",
+        ccd="off",
+        gravity=(0.0, 0.0),
+        dt=1 / 60,
+        steps=10,
+    )
+    monkeypatch.setattr(metrics, "PREFILTER_PATHS", 0 if prefilter else 10**9)
+    sim = Simulation(sc)
+    m = metrics.Measure(sim, ["tunneled"], [])
+    for batch in sim.batches(10, size=4):
+        m.add(batch)
+    assert m.values()["tunneled_bodies"] == "through"
+    assert simulate(sc, sample_times(10 / 60, 1 / 60)).tunneled == ["through"]
