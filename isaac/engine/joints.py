@@ -53,6 +53,9 @@ KIND_CODES = {"revolute": REVOLUTE, "distance": DISTANCE, "weld": WELD, "prismat
 # Box2D 2.3's caps on one position correction (b2_maxLinearCorrection, b2_maxAngularCorrection)
 MAX_LINEAR_CORRECTION = 0.2  # m
 MAX_ANGULAR_CORRECTION = 8.0 / 180.0 * np.pi  # rad
+# a body turning faster than this in a sub-step (rad) gets the joints' Newton step
+# (`_slow_turns`); below it the bits are those of physics version 2
+SLOW_TURN = 0.05
 
 # scratch columns: what a revolute joint's velocity pass reads first (arms, effective mass, on,
 # impulses: the first two 64-byte lines of its row), the rest after; J0 .. JU stay adjacent
@@ -415,6 +418,33 @@ def _end_separation(rax, ray, rbx, rby, v, a, b, h):
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
+def _slow_turns(v, a, b, h):
+    """Whether both bodies turn by at most SLOW_TURN (rad) in the sub-step of h at velocities
+    v: then the end-of-step target is solved with the arms the sub-step starts with (the
+    prepared effective mass). A faster turn takes a Newton step about the arms it ends with
+    (`_end_arms`): with the starting arms, a link whipping round at h w of 1 rad or more
+    (a 40-link chain at dt = 1/120 s) was pushed further round each iteration, and the chain
+    blew up."""
+    return abs(h * v[a, 2]) <= SLOW_TURN and abs(h * v[b, 2]) <= SLOW_TURN
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _end_arms(rax, ray, rbx, rby, v, a, b, h):
+    """The arms (m, world) turned by the sub-step's turns h w (`_turn`), and the change of
+    the anchors' separation over the sub-step, as `_end_separation`: the derivative of that
+    change by either body's velocities is the point constraint's Jacobian with these arms."""
+    ca, sa = _turn(h * v[a, 2])
+    cb, sb = _turn(h * v[b, 2])
+    pax = rax + (rax * ca - ray * sa)
+    pay = ray + (ray * ca + rax * sa)
+    pbx = rbx + (rbx * cb - rby * sb)
+    pby = rby + (rby * cb + rbx * sb)
+    ex = h * (v[b, 0] - v[a, 0]) + (rbx * cb - rby * sb) - (rax * ca - ray * sa)
+    ey = h * (v[b, 1] - v[a, 1]) + (rby * cb + rbx * sb) - (ray * ca + rax * sa)
+    return pax, pay, pbx, pby, ex, ey
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
 def _turn(x):
     """(cos x - 1, sin x) of a sub-step's turn x = h w (rad): to second order while |x| <= 0.05
     (error below x^3 / 6 = 2e-5 x), exactly (isaac.trig) beyond, where a whipping link's arm
@@ -462,12 +492,23 @@ def solve_joint_velocities(J, jt, v, inv, h):
                 t[J2] += d
                 _apply(v, inv, a, b, 0.0, 0.0, d, d)
             # the anchors' separation at the end of the sub-step, at the velocities so far
-            ex, ey = _end_separation(rax, ray, rbx, rby, v, a, b, h)
-            ix = -(t[K11] * ex + t[K12] * ey) * inv_h
-            iy = -(t[K12] * ex + t[K22] * ey) * inv_h
-            t[J0] += ix
-            t[J1] += iy
-            _apply(v, inv, a, b, ix, iy, rax * iy - ray * ix, rbx * iy - rby * ix)
+            if _slow_turns(v, a, b, h):
+                ex, ey = _end_separation(rax, ray, rbx, rby, v, a, b, h)
+                ix = -(t[K11] * ex + t[K12] * ey) * inv_h
+                iy = -(t[K12] * ex + t[K22] * ey) * inv_h
+                t[J0] += ix
+                t[J1] += iy
+                _apply(v, inv, a, b, ix, iy, rax * iy - ray * ix, rbx * iy - rby * ix)
+            else:  # a Newton step about the arms the sub-step ends with (`_end_arms`)
+                pax, pay, pbx, pby, ex, ey = _end_arms(rax, ray, rbx, rby, v, a, b, h)
+                k11, k12, k22 = _point_mass(
+                    inv[a, 0], inv[a, 1], inv[b, 0], inv[b, 1], pax, pay, pbx, pby
+                )
+                ix = -(k11 * ex + k12 * ey) * inv_h
+                iy = -(k12 * ex + k22 * ey) * inv_h
+                t[J0] += ix
+                t[J1] += iy
+                _apply(v, inv, a, b, ix, iy, pax * iy - pay * ix, pbx * iy - pby * ix)
         elif kind == DISTANCE:
             ux = t[UX]
             uy = t[UY]
@@ -478,16 +519,38 @@ def solve_joint_velocities(J, jt, v, inv, h):
                 cdot = ux * (v[b, 0] - v[b, 2] * rby - v[a, 0] + v[a, 2] * ray) + uy * (
                     v[b, 1] + v[b, 2] * rbx - v[a, 1] - v[a, 2] * rax
                 )
+                # the direction and arms the impulse acts along
+                pux = ux
+                puy = uy
+                pcra = cra
+                pcrb = crb
                 if part == 0:
                     if J.spring[k]:
                         d = -t[MS] * t[KAX] * (cdot + t[BIAS]) - t[IS] * t[J2]
-                    elif J.rigid[k]:
+                    elif J.rigid[k] and _slow_turns(v, a, b, h):
                         # the length at the end of the sub-step, at the velocities so far
                         ex, ey = _end_separation(rax, ray, rbx, rby, v, a, b, h)
                         ex += t[DX]
                         ey += t[DY]
                         now = np.sqrt(t[DX] * t[DX] + t[DY] * t[DY])
                         d = -t[KAX] * (np.sqrt(ex * ex + ey * ey) - now) * inv_h
+                    elif J.rigid[k]:
+                        # a Newton step about the arms and axis the sub-step ends with
+                        pax, pay, pbx, pby, ex, ey = _end_arms(rax, ray, rbx, rby, v, a, b, h)
+                        ex += t[DX]
+                        ey += t[DY]
+                        end = np.sqrt(ex * ex + ey * ey)
+                        if end > 0.0:
+                            pux = ex / end
+                            puy = ey / end
+                        pcra = pax * puy - pay * pux
+                        pcrb = pbx * puy - pby * pux
+                        mass = _inv_or_zero(
+                            inv[a, 0] + inv[b, 0] + inv[a, 1] * pcra * pcra
+                            + inv[b, 1] * pcrb * pcrb
+                        )  # fmt: skip
+                        now = np.sqrt(t[DX] * t[DX] + t[DY] * t[DY])
+                        d = -mass * (end - now) * inv_h
                     else:
                         continue
                     t[J2] += d
@@ -497,7 +560,7 @@ def solve_joint_velocities(J, jt, v, inv, h):
                     d = _one_sided(jt, k, JL, cdot, t[CL], inv_h, t[KAX])
                 else:
                     d = -_one_sided(jt, k, JU, -cdot, t[CU], inv_h, t[KAX])
-                _apply(v, inv, a, b, d * ux, d * uy, d * cra, d * crb)
+                _apply(v, inv, a, b, d * pux, d * puy, d * pcra, d * pcrb)
         else:  # PRISMATIC
             ux = t[UX]
             uy = t[UY]
