@@ -428,3 +428,21 @@ def test_a_sweep_counts_a_shot_through_a_concrete_disc_beside_a_wall(prefilter, 
         m.add(batch)
     assert m.values()["tunneled_bodies"] == "through"
     assert simulate(sc, sample_times(10 / 60, 1 / 60)).tunneled == ["through"]
+
+
+@pytest.mark.parametrize(
+    "name, second", [("pendulum", "max_joint_error_m"), ("bounce", "max_penetration_m")]
+)
+def test_the_plots_second_panel_shows_the_joint_error_for_a_scene_with_joints(
+    tmp_path, monkeypatch, name, second
+):
+    from isaac.app.tradeoff import command
+
+    shown = []
+    monkeypatch.setattr(command, "plot", lambda result, path, second: shown.append(second))
+    status = main(
+        ["tradeoff", f"scenes/{name}.yaml", "--grid", "preset=fast;dt=x1", "--duration", "0.2",
+         "--repeats", "1", "--min-time", "0", "--quiet", "--csv", str(tmp_path / "o.csv"),
+         "--png", str(tmp_path / "o.png")]
+    )  # fmt: skip
+    assert status == 0 and shown == [second]

@@ -94,6 +94,7 @@ def plot(result: TradeoffResult, path, *, second: str = "max_penetration_m") -> 
         "max_penetration_m": "max penetration (m)",
         "energy_error": "energy error (rel.)",
         "com_error_m": "centre-of-mass error (m)",
+        "max_joint_error_m": "largest joint error (m)",
     }
     fig, axes = plt.subplots(1, 2, figsize=(10.5, 4.2), dpi=90)
     labels = list(dict.fromkeys(r["setting"] for r in result.rows))
