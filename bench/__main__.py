@@ -1,6 +1,7 @@
 """`python -m bench`: the benchmark suite (see bench/suite.py), then the loaded-machine recording
 measurement (bench/loaded.py) unless `--no-loaded` or `--quick`, then Box2D v3's joint grid
-against pymunk (bench/joint_grid.py) unless `--no-joint-grid` or `--quick`."""
+against pymunk (bench/joint_grid.py) and the shipped chain and Newton's cradle against pymunk
+(bench/joint_scenes.py) unless `--no-joint-grid` or `--quick`."""
 
 import argparse
 import sys
@@ -10,8 +11,8 @@ from bench.suite import RESULTS, main
 NO_LOADED_HELP = (
     "  --no-loaded           skip the recording measurement beside two busy-loop processes "
     "(bench/loaded.py, about 2 min)\n"
-    "  --no-joint-grid       skip the 100 x 100 joint grid against pymunk "
-    "(bench/joint_grid.py, about 1 min)"
+    "  --no-joint-grid       skip the 100 x 100 joint grid, the chain and the cradle against "
+    "pymunk (bench/joint_grid.py, bench/joint_scenes.py, about 2 min)"
 )
 
 argv = sys.argv[1:]
@@ -36,4 +37,8 @@ if rc == 0 and not no_joint_grid and "--quick" not in argv:
     from bench import joint_grid
 
     rc = joint_grid.main([])
+    if rc == 0:
+        from bench import joint_scenes
+
+        rc = joint_scenes.main([])
 sys.exit(rc)

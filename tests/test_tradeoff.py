@@ -22,8 +22,10 @@ from isaac.app.tradeoff import (
     simulate,
 )
 from isaac.app.tradeoff.measure import _pareto
+from isaac.app.tradeoff.report import format_table
 from isaac.engine.simulation import Simulation
-from isaac.scene import PRESETS, load_scene
+from isaac.scene import PRESETS, BodySpec, Scene, load_scene
+from isaac.scene.spec import JointSpec
 
 G = 9.81
 
@@ -265,3 +267,182 @@ def test_command_refuses_analytic_reference_for_a_pile(capsys):
     )
     assert status == 2
     assert "no closed form known" in capsys.readouterr().err
+
+
+# --- circles and joints -----------------------------------------------------------------------
+
+
+def _disc(name, radius=0.5, **fields) -> BodySpec:
+    return BodySpec(name=name, vertices=(), circle=radius, **fields)
+
+
+def _disc_drop(**world) -> Scene:
+    """A disc of radius 0.5 m dropped from 5 m onto level concrete ground (top at y = 0)."""
+    return scene(
+        box("ground", 10.0, 1.0, position=(0.0, -0.5), concrete=True, restitution=0.8),
+        _disc("disc", position=(0.0, 5.0), restitution=0.8),
+        gravity=(0.0, -G),
+        **{"preset": "balanced", "dt": 1 / 60, "steps": 120, **world},
+    )
+
+
+def test_a_dropped_disc_is_the_drop_closed_form_and_lands_on_its_rim():
+    sc = _disc_drop()
+    assert analytic_model(sc) == "drop"
+    t_land = math.sqrt(2 * 4.5 / G)  # its lowest point falls 4.5 m
+    traj = analytic_trajectory(sc, np.array([0.0, 0.5 * t_land, t_land]))
+    assert traj.position[:, 1, 1] == pytest.approx(
+        [5.0, 5.0 - 0.5 * G * (0.5 * t_land) ** 2, 0.5], abs=1e-12
+    )
+    assert traj.velocity[1, 1, 1] == pytest.approx(-G * 0.5 * t_land, rel=1e-12)
+    assert traj.velocity[2, 1, 1] == pytest.approx(0.8 * G * t_land, rel=1e-12)  # bounced
+
+
+def test_the_engines_disc_drop_approaches_the_closed_form_as_dt_shrinks():
+    sc = _disc_drop()
+    grid = parse_grid(["preset=balanced", "dt=1/60,1/120,1/240"], sc.world.dt)
+    result = measure(sc, grid, reference="analytic", duration=2.0, repeats=1, min_seconds=0.0)
+    assert result.reference == "analytic (drop)"
+    errors = [r["rms_error_m"] for r in result.rows]
+    assert errors[0] > errors[1] > errors[2] > 0.0
+    assert errors[2] < 0.02  # m, over two bounces
+    assert all(r["tunneled"] == 0 and r["max_joint_error_m"] == 0.0 for r in result.rows)
+
+
+def test_two_discs_head_on_are_the_head_on_closed_form_unless_joined():
+    a = _disc("a", position=(-2.0, 0.0), velocity=(3.0, 0.0), restitution=1.0)
+    b = _disc("b", position=(2.0, 0.0), restitution=1.0)
+    sc = scene(a, b, gravity=(0.0, 0.0), dt=0.01, steps=200)
+    assert analytic_model(sc) == "head_on"
+    traj = analytic_trajectory(sc, np.array([0.5, 1.5]))  # rims meet at t = 3 m / 3 m/s = 1 s
+    assert traj.velocity[:, :, 0].tolist() == [[3.0, 0.0], [0.0, 3.0]]
+    rod = JointSpec(
+        name="rod", kind="distance", a=0, b=1, local_a=(0.0, 0.0), local_b=(0.0, 0.0), length=4.0
+    )
+    joined = replace(sc, joints=(rod,))
+    assert analytic_model(joined) is None  # held by the rod: no free flight
+    with pytest.raises(TradeoffError, match="it has joints"):
+        analytic_model(replace(joined, analytic={"model": "head_on"}))
+
+
+def test_analytic_reference_refuses_the_pendulum_in_one_line(capsys):
+    status = main(
+        ["tradeoff", "scenes/pendulum.yaml", "--reference", "analytic", "--quiet",
+         "--duration", "0.1"]
+    )  # fmt: skip
+    assert status == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "no closed form known" in err[0]
+
+
+def test_a_shot_through_a_concrete_disc_is_counted_as_tunneling():
+    def shot(ccd):
+        return scene(
+            _disc("post", 0.05, concrete=True),
+            box("bullet", 0.1, 0.1, position=(-0.5, 0.0), velocity=(200.0, 0.0)),
+            preset="balanced",
+            ccd=ccd,
+            gravity=(0.0, 0.0),
+            dt=1 / 60,
+            steps=10,
+        )
+
+    times = sample_times(10 / 60, 1 / 60)
+    assert simulate(shot("off"), times).tunneled == ["bullet"]
+    assert simulate(shot("speculative"), times).tunneled == []
+
+
+def test_measure_on_the_chain_reports_each_runs_largest_joint_error():
+    sc = load_scene("scenes/chain.yaml")
+    grid = parse_grid(["preset=fast,balanced", "dt=x1"], sc.world.dt)
+    result = measure(sc, grid, duration=0.5, repeats=1, min_seconds=0.0)
+    assert result.joints
+    for point, row in zip(grid, result.rows):
+        # recomputed from a run of that setting's own records (by the compiled driver; the
+        # measurement steps one at a time)
+        run_scene = replace(sc, world=point.world(sc.world, 0.5))
+        errors = [float(r.joints.error[:, 0].max()) for r in Simulation(run_scene).run()]
+        assert row["max_joint_error_m"] == max(errors) > 0.0
+        assert row["diverged"] == "" and row["rms_error_m"] < 0.05
+    assert "joint err m" in format_table(result)
+    assert "joint err m" not in format_table(
+        measure(_disc_drop(), grid[:1], duration=0.2, repeats=1, min_seconds=0.0)
+    )
+
+
+@pytest.mark.parametrize("name", ["rolling", "chain"])
+def test_the_command_runs_on_a_shipped_scene_with_circles_or_joints(tmp_path, capsys, name):
+    csv_path = tmp_path / "out.csv"
+    status = main(
+        ["tradeoff", f"scenes/{name}.yaml", "--grid", "preset=fast,balanced;dt=x1", "--duration",
+         "0.5", "--repeats", "1", "--min-time", "0", "--quiet", "--csv", str(csv_path),
+         "--no-plot"]
+    )  # fmt: skip
+    assert status == 0
+    with open(csv_path) as f:
+        rows = list(csv.DictReader(f))
+    assert [r["setting"] for r in rows] == ["accurate (reference)", "fast", "balanced"]
+    for r in rows:
+        assert math.isfinite(float(r["rms_error_m"])) and r["diverged"] == ""
+        assert float(r["max_joint_error_m"]) < 1e-2
+    assert ("joint err m" in capsys.readouterr().out) == (name == "chain")
+
+
+def test_the_default_grid_of_a_scene_with_joints_leaves_out_the_seed_preset():
+    grid = parse_grid(None, 0.01, joints=True)
+    assert sorted({p.label for p in grid}) == ["accurate", "balanced", "fast"]
+    assert len(grid) == 3 * 3
+
+
+def test_the_seed_solver_on_a_scene_with_joints_is_refused_in_one_line(capsys):
+    status = main(
+        ["tradeoff", "scenes/pendulum.yaml", "--grid", "preset=seed,balanced", "--quiet",
+         "--duration", "0.1"]
+    )  # fmt: skip
+    assert status == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--grid seed" in err[0] and "sequential solver" in err[0]
+
+
+@pytest.mark.parametrize("prefilter", [True, False], ids=["bounding boxes first", "every path"])
+def test_a_sweep_counts_a_shot_through_a_concrete_disc_beside_a_wall(prefilter, monkeypatch):
+    # the sweep's metric shares the tradeoff's clipping: a concrete disc and a concrete wall,
+    # one bullet through both, one over the wall and past the disc
+    from isaac.app.sweep import metrics
+
+    sc = scene(
+        _disc("post", 0.05, concrete=True),
+        box("wall", 0.05, 4.0, position=(5.0, 0.0), concrete=True),
+        box("through", 0.1, 0.1, position=(-0.5, 0.0), velocity=(200.0, 0.0)),
+        box("over", 0.1, 0.1, position=(-0.5, 3.0), velocity=(200.0, 0.0)),
+        preset="balanced",
+        ccd="off",
+        gravity=(0.0, 0.0),
+        dt=1 / 60,
+        steps=10,
+    )
+    monkeypatch.setattr(metrics, "PREFILTER_PATHS", 0 if prefilter else 10**9)
+    sim = Simulation(sc)
+    m = metrics.Measure(sim, ["tunneled"], [])
+    for batch in sim.batches(10, size=4):
+        m.add(batch)
+    assert m.values()["tunneled_bodies"] == "through"
+    assert simulate(sc, sample_times(10 / 60, 1 / 60)).tunneled == ["through"]
+
+
+@pytest.mark.parametrize(
+    "name, second", [("pendulum", "max_joint_error_m"), ("bounce", "max_penetration_m")]
+)
+def test_the_plots_second_panel_shows_the_joint_error_for_a_scene_with_joints(
+    tmp_path, monkeypatch, name, second
+):
+    from isaac.app.tradeoff import command
+
+    shown = []
+    monkeypatch.setattr(command, "plot", lambda result, path, second: shown.append(second))
+    status = main(
+        ["tradeoff", f"scenes/{name}.yaml", "--grid", "preset=fast;dt=x1", "--duration", "0.2",
+         "--repeats", "1", "--min-time", "0", "--quiet", "--csv", str(tmp_path / "o.csv"),
+         "--png", str(tmp_path / "o.png")]
+    )  # fmt: skip
+    assert status == 0 and shown == [second]

@@ -18,4 +18,4 @@ a model is built from). Never an I/O library, `recorder`, `replay` or `isaac.app
 # The physics version: bumped whenever the engine's results change on purpose (CHANGELOG.md
 # lists each change). Logs record it beside the engine version; a log without it is version 1.
 # `isaac replay` refuses a log of another physics version unless given --tolerance.
-PHYSICS_VERSION = 2
+PHYSICS_VERSION = 3

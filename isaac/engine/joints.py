@@ -53,21 +53,25 @@ KIND_CODES = {"revolute": REVOLUTE, "distance": DISTANCE, "weld": WELD, "prismat
 # Box2D 2.3's caps on one position correction (b2_maxLinearCorrection, b2_maxAngularCorrection)
 MAX_LINEAR_CORRECTION = 0.2  # m
 MAX_ANGULAR_CORRECTION = 8.0 / 180.0 * np.pi  # rad
+# a body turning faster than this in a sub-step (rad) gets the joints' Newton step
+# (`_slow_turns`); below it the bits are those of physics version 2
+SLOW_TURN = 0.05
 
-# scratch columns
+# scratch columns: what a revolute joint's velocity pass reads first (arms, effective mass, on,
+# impulses: the first two 64-byte lines of its row), the rest after; J0 .. JU stay adjacent
 RAX, RAY, RBX, RBY = 0, 1, 2, 3  # world anchor arms (m)
-UX, UY = 4, 5  # distance: unit axis a -> b; prismatic: the slide axis (world)
-PX, PY = 6, 7  # prismatic: the axis's normal
-K11, K12, K22 = 8, 9, 10  # inverse of the 2x2 effective mass (point, or prismatic normal+angle)
-KA = 11  # 1 / angular effective mass (motor, limits, weld)
-KAX = 12  # 1 / effective mass along the axis (distance, prismatic)
-CL, CU = 13, 14  # how far inside the lower / upper limit (m or rad; < 0: beyond it)
-BIAS, MS, IS = 15, 16, 17  # a spring's bias velocity and soft mass / impulse scales
-A1, A2, S1, S2 = 18, 19, 20, 21  # prismatic: (d + r_a) x u, r_b x u, (d + r_a) x p, r_b x p
-ON = 22  # 1.0 when both bodies exist
-J0, J1, J2, JM, JL, JU = 23, 24, 25, 26, 27, 28  # accumulated impulses
+K11, K12, K22 = 4, 5, 6  # inverse of the 2x2 effective mass (point, or prismatic normal+angle)
+ON = 7  # 1.0 when both bodies exist
+J0, J1, J2, JM, JL, JU = 8, 9, 10, 11, 12, 13  # accumulated impulses
+KA = 14  # 1 / angular effective mass (motor, limits, weld)
+CL, CU = 15, 16  # how far inside the lower / upper limit (m or rad; < 0: beyond it)
+UX, UY = 17, 18  # distance: unit axis a -> b; prismatic: the slide axis (world)
+PX, PY = 19, 20  # prismatic: the axis's normal
+KAX = 21  # 1 / effective mass along the axis (distance, prismatic)
+BIAS, MS, IS = 22, 23, 24  # a spring's bias velocity and soft mass / impulse scales
+A1, A2, S1, S2 = 25, 26, 27, 28  # prismatic: (d + r_a) x u, r_b x u, (d + r_a) x p, r_b x p
 DX, DY = 29, 30  # the anchors' separation b - a (m, world) after the push-out
-WIDTH = 31
+WIDTH = 32  # (one spare column: a row is four whole 64-byte lines)
 JOINT_IMPULSES = 6  # J0 .. JU: point x / normal, point y / rotation, axial / angular, motor,
 # lower limit, upper limit (N s, or N m s for rotations)
 
@@ -160,10 +164,46 @@ def _wrap(angle):
     return angle
 
 
+# Speed: the helpers below take scalars (or the kernels' own array arguments), never the joint
+# table or one of its arrays: each such argument cost a reference count update, 0.4-0.9 us a
+# joint on the 100 x 100 joint grid (bench/joint_grid.py), more than the physics.
+
+
 @numba.njit(cache=True, nogil=True, inline="always")
-def _arm(local, k, angle):
+def _arm(lx, ly, angle):
+    """The body-frame vector (lx, ly) (m) turned by the body's angle (rad): world frame."""
     s, c = sin_cos(angle)
-    return c * local[k, 0] - s * local[k, 1], s * local[k, 0] + c * local[k, 1]
+    return _turned(lx, ly, s, c)
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _turned(lx, ly, s, c):
+    """(lx, ly) turned by the angle whose (sin, cos) are (s, c)."""
+    return c * lx - s * ly, s * lx + c * ly
+
+
+@numba.njit(cache=True, nogil=True)
+def _rotations(J, angle, exists):
+    """(n, 2) sin and cos of every existing body's angle, or (0, 2) when the joints have fewer
+    ends than there are bodies (then each end computes its own: the same bits, as sin_cos is
+    a function of the angle alone). One sin_cos per body instead of one per joint end: the
+    100 x 100 joint grid has 10,000 bodies and 39,586 ends."""
+    n = angle.shape[0]
+    if n > 2 * J.kind.shape[0]:
+        return np.empty((0, 2))
+    rot = np.empty((n, 2))
+    for i in range(n):
+        if exists[i]:
+            rot[i, 0], rot[i, 1] = sin_cos(angle[i])
+    return rot
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _sin_cos_of(rot, angle, i):
+    """Body i's (sin, cos): from `_rotations`' table when it has one."""
+    if rot.shape[0]:
+        return rot[i, 0], rot[i, 1]
+    return sin_cos(angle[i])
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
@@ -193,6 +233,9 @@ def prepare_joints(J, jt, position, angle, exists, inv_mass, inv_inertia, h, war
     """Fill the scratch rows for this sub-step (poses after the push-out) and load the
     accumulated impulses: `warm` (m, JOINT_IMPULSES), last sub-step's, when warm_starting
     (else they start from zero)."""
+    local_a = J.local_a
+    local_b = J.local_b
+    rot = _rotations(J, angle, exists)
     for k in range(J.kind.shape[0]):
         a = J.a[k]
         b = J.b[k]
@@ -202,8 +245,10 @@ def prepare_joints(J, jt, position, angle, exists, inv_mass, inv_inertia, h, war
         if not (exists[a] and exists[b]):
             continue
         t[ON] = 1.0
-        rax, ray = _arm(J.local_a, k, angle[a])
-        rbx, rby = _arm(J.local_b, k, angle[b])
+        sa, ca = _sin_cos_of(rot, angle, a)
+        sb, cb = _sin_cos_of(rot, angle, b)
+        rax, ray = _turned(local_a[k, 0], local_a[k, 1], sa, ca)
+        rbx, rby = _turned(local_b[k, 0], local_b[k, 1], sb, cb)
         t[RAX] = rax
         t[RAY] = ray
         t[RBX] = rbx
@@ -294,23 +339,21 @@ def _apply(v, inv, a, b, px, py, la, lb):
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
-def _push(J, t, k, v, inv, impulses):
-    """Apply impulses (J0 .. JU layout) of joint k as the solve does, with this row's arms."""
-    a = J.a[k]
-    b = J.b[k]
-    kind = J.kind[k]
-    rax = t[RAX]
-    ray = t[RAY]
-    rbx = t[RBX]
-    rby = t[RBY]
+def _push(kind, a, b, jt, k, v, inv, impulses):
+    """Apply impulses (J0 .. JU layout) of joint k, of `kind` between bodies a and b, as the
+    solve does, with its scratch row's arms."""
+    rax = jt[k, RAX]
+    ray = jt[k, RAY]
+    rbx = jt[k, RBX]
+    rby = jt[k, RBY]
     j0, j1, j2, jm, jl, ju = impulses
     if kind == REVOLUTE or kind == WELD:
         ang = jm + jl - ju + j2
         _apply(v, inv, a, b, j0, j1, rax * j1 - ray * j0 + ang, rbx * j1 - rby * j0 + ang)
     elif kind == DISTANCE:
         axial = j2 + jl - ju
-        ux = t[UX]
-        uy = t[UY]
+        ux = jt[k, UX]
+        uy = jt[k, UY]
         _apply(
             v,
             inv,
@@ -328,10 +371,10 @@ def _push(J, t, k, v, inv, impulses):
             inv,
             a,
             b,
-            j0 * t[PX] + axial * t[UX],
-            j0 * t[PY] + axial * t[UY],
-            j0 * t[S1] + j1 + axial * t[A1],
-            j0 * t[S2] + j1 + axial * t[A2],
+            j0 * jt[k, PX] + axial * jt[k, UX],
+            j0 * jt[k, PY] + axial * jt[k, UY],
+            j0 * jt[k, S1] + j1 + axial * jt[k, A1],
+            j0 * jt[k, S2] + j1 + axial * jt[k, A2],
         )
 
 
@@ -342,25 +385,25 @@ def warm_start_joints(J, jt, v, inv):
         t = jt[k]
         if t[ON] == 0.0:
             continue
-        _push(J, t, k, v, inv, (t[J0], t[J1], t[J2], t[JM], t[JL], t[JU]))
+        _push(J.kind[k], J.a[k], J.b[k], jt, k, v, inv, (t[J0], t[J1], t[J2], t[JM], t[JL], t[JU]))
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
-def _one_sided(t, col, cdot, c, inv_h, mass):
+def _one_sided(jt, k, col, cdot, c, inv_h, mass):
     """A limit's new accumulated impulse (>= 0) and its increment: a limit still open by c > 0
     may close within the sub-step (c / h), one reached or passed holds (position errors are
     the position pass's)."""
     if c == np.inf:  # no limit on this side
         return 0.0
     bias = c * inv_h if c > 0.0 else 0.0
-    old = t[col]
+    old = jt[k, col]
     new = max(old - mass * (cdot + bias), 0.0)
-    t[col] = new
+    jt[k, col] = new
     return new - old
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
-def _end_separation(t, v, a, b, h):
+def _end_separation(rax, ray, rbx, rby, v, a, b, h):
     """How the anchors' separation b - a (m) changes over a sub-step of h at velocities v:
     each arm r turned by h w (`_turn`: r (1 - (h w)^2 / 2) + h w x r for small turns, exactly
     for large ones). The separation itself is left to the position pass: fed back here as
@@ -369,13 +412,36 @@ def _end_separation(t, v, a, b, h):
     hwb = h * v[b, 2]
     ca, sa = _turn(hwa)
     cb, sb = _turn(hwb)
-    rax = t[RAX]
-    ray = t[RAY]
-    rbx = t[RBX]
-    rby = t[RBY]
     ex = h * (v[b, 0] - v[a, 0]) + (rbx * cb - rby * sb) - (rax * ca - ray * sa)
     ey = h * (v[b, 1] - v[a, 1]) + (rby * cb + rbx * sb) - (ray * ca + rax * sa)
     return ex, ey
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _slow_turns(v, a, b, h):
+    """Whether both bodies turn by at most SLOW_TURN (rad) in the sub-step of h at velocities
+    v: then the end-of-step target is solved with the arms the sub-step starts with (the
+    prepared effective mass). A faster turn takes a Newton step about the arms it ends with
+    (`_end_arms`): with the starting arms, a link whipping round at h w of 1 rad or more
+    (a 40-link chain at dt = 1/120 s) was pushed further round each iteration, and the chain
+    blew up."""
+    return abs(h * v[a, 2]) <= SLOW_TURN and abs(h * v[b, 2]) <= SLOW_TURN
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _end_arms(rax, ray, rbx, rby, v, a, b, h):
+    """The arms (m, world) turned by the sub-step's turns h w (`_turn`), and the change of
+    the anchors' separation over the sub-step, as `_end_separation`: the derivative of that
+    change by either body's velocities is the point constraint's Jacobian with these arms."""
+    ca, sa = _turn(h * v[a, 2])
+    cb, sb = _turn(h * v[b, 2])
+    pax = rax + (rax * ca - ray * sa)
+    pay = ray + (ray * ca + rax * sa)
+    pbx = rbx + (rbx * cb - rby * sb)
+    pby = rby + (rby * cb + rbx * sb)
+    ex = h * (v[b, 0] - v[a, 0]) + (rbx * cb - rby * sb) - (rax * ca - ray * sa)
+    ey = h * (v[b, 1] - v[a, 1]) + (rby * cb + rbx * sb) - (ray * ca + rax * sa)
+    return pax, pay, pbx, pby, ex, ey
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
@@ -413,9 +479,9 @@ def solve_joint_velocities(J, jt, v, inv, h):
                 t[JM] = new
                 _apply(v, inv, a, b, 0.0, 0.0, new - old, new - old)
             if kind == REVOLUTE and J.has_limit[k]:
-                d = _one_sided(t, JL, v[b, 2] - v[a, 2], t[CL], inv_h, t[KA])
+                d = _one_sided(jt, k, JL, v[b, 2] - v[a, 2], t[CL], inv_h, t[KA])
                 _apply(v, inv, a, b, 0.0, 0.0, d, d)
-                d = _one_sided(t, JU, v[a, 2] - v[b, 2], t[CU], inv_h, t[KA])
+                d = _one_sided(jt, k, JU, v[a, 2] - v[b, 2], t[CU], inv_h, t[KA])
                 _apply(v, inv, a, b, 0.0, 0.0, -d, -d)
             if kind == WELD:
                 cdot = v[b, 2] - v[a, 2]
@@ -426,12 +492,23 @@ def solve_joint_velocities(J, jt, v, inv, h):
                 t[J2] += d
                 _apply(v, inv, a, b, 0.0, 0.0, d, d)
             # the anchors' separation at the end of the sub-step, at the velocities so far
-            ex, ey = _end_separation(t, v, a, b, h)
-            ix = -(t[K11] * ex + t[K12] * ey) * inv_h
-            iy = -(t[K12] * ex + t[K22] * ey) * inv_h
-            t[J0] += ix
-            t[J1] += iy
-            _apply(v, inv, a, b, ix, iy, rax * iy - ray * ix, rbx * iy - rby * ix)
+            if _slow_turns(v, a, b, h):
+                ex, ey = _end_separation(rax, ray, rbx, rby, v, a, b, h)
+                ix = -(t[K11] * ex + t[K12] * ey) * inv_h
+                iy = -(t[K12] * ex + t[K22] * ey) * inv_h
+                t[J0] += ix
+                t[J1] += iy
+                _apply(v, inv, a, b, ix, iy, rax * iy - ray * ix, rbx * iy - rby * ix)
+            else:  # a Newton step about the arms the sub-step ends with (`_end_arms`)
+                pax, pay, pbx, pby, ex, ey = _end_arms(rax, ray, rbx, rby, v, a, b, h)
+                k11, k12, k22 = _point_mass(
+                    inv[a, 0], inv[a, 1], inv[b, 0], inv[b, 1], pax, pay, pbx, pby
+                )
+                ix = -(k11 * ex + k12 * ey) * inv_h
+                iy = -(k12 * ex + k22 * ey) * inv_h
+                t[J0] += ix
+                t[J1] += iy
+                _apply(v, inv, a, b, ix, iy, pax * iy - pay * ix, pbx * iy - pby * ix)
         elif kind == DISTANCE:
             ux = t[UX]
             uy = t[UY]
@@ -442,26 +519,48 @@ def solve_joint_velocities(J, jt, v, inv, h):
                 cdot = ux * (v[b, 0] - v[b, 2] * rby - v[a, 0] + v[a, 2] * ray) + uy * (
                     v[b, 1] + v[b, 2] * rbx - v[a, 1] - v[a, 2] * rax
                 )
+                # the direction and arms the impulse acts along
+                pux = ux
+                puy = uy
+                pcra = cra
+                pcrb = crb
                 if part == 0:
                     if J.spring[k]:
                         d = -t[MS] * t[KAX] * (cdot + t[BIAS]) - t[IS] * t[J2]
-                    elif J.rigid[k]:
+                    elif J.rigid[k] and _slow_turns(v, a, b, h):
                         # the length at the end of the sub-step, at the velocities so far
-                        ex, ey = _end_separation(t, v, a, b, h)
+                        ex, ey = _end_separation(rax, ray, rbx, rby, v, a, b, h)
                         ex += t[DX]
                         ey += t[DY]
                         now = np.sqrt(t[DX] * t[DX] + t[DY] * t[DY])
                         d = -t[KAX] * (np.sqrt(ex * ex + ey * ey) - now) * inv_h
+                    elif J.rigid[k]:
+                        # a Newton step about the arms and axis the sub-step ends with
+                        pax, pay, pbx, pby, ex, ey = _end_arms(rax, ray, rbx, rby, v, a, b, h)
+                        ex += t[DX]
+                        ey += t[DY]
+                        end = np.sqrt(ex * ex + ey * ey)
+                        if end > 0.0:
+                            pux = ex / end
+                            puy = ey / end
+                        pcra = pax * puy - pay * pux
+                        pcrb = pbx * puy - pby * pux
+                        mass = _inv_or_zero(
+                            inv[a, 0] + inv[b, 0] + inv[a, 1] * pcra * pcra
+                            + inv[b, 1] * pcrb * pcrb
+                        )  # fmt: skip
+                        now = np.sqrt(t[DX] * t[DX] + t[DY] * t[DY])
+                        d = -mass * (end - now) * inv_h
                     else:
                         continue
                     t[J2] += d
                 elif not J.has_limit[k]:
                     break
                 elif part == 1:
-                    d = _one_sided(t, JL, cdot, t[CL], inv_h, t[KAX])
+                    d = _one_sided(jt, k, JL, cdot, t[CL], inv_h, t[KAX])
                 else:
-                    d = -_one_sided(t, JU, -cdot, t[CU], inv_h, t[KAX])
-                _apply(v, inv, a, b, d * ux, d * uy, d * cra, d * crb)
+                    d = -_one_sided(jt, k, JU, -cdot, t[CU], inv_h, t[KAX])
+                _apply(v, inv, a, b, d * pux, d * puy, d * pcra, d * pcrb)
         else:  # PRISMATIC
             ux = t[UX]
             uy = t[UY]
@@ -484,9 +583,9 @@ def solve_joint_velocities(J, jt, v, inv, h):
                     elif not J.has_limit[k]:
                         break
                     elif part == 1:
-                        d = _one_sided(t, JL, cdot, t[CL], inv_h, t[KAX])
+                        d = _one_sided(jt, k, JL, cdot, t[CL], inv_h, t[KAX])
                     else:
-                        d = -_one_sided(t, JU, -cdot, t[CU], inv_h, t[KAX])
+                        d = -_one_sided(jt, k, JU, -cdot, t[CU], inv_h, t[KAX])
                     _apply(v, inv, a, b, d * ux, d * uy, d * a1, d * a2)
             px = t[PX]
             py = t[PY]
@@ -519,26 +618,42 @@ def correct_joint_positions(J, position, angle, exists, inv_mass, inv_inertia, i
     limit it is past. Springs are not corrected: their stretch is their force. Each correction
     is capped at MAX_LINEAR_CORRECTION (m) and MAX_ANGULAR_CORRECTION (rad)."""
     m = J.kind.shape[0]
+    local_a = J.local_a
+    local_b = J.local_b
+    axis = J.axis
     for _ in range(iterations):
         for k in range(m):
             a = J.a[k]
             b = J.b[k]
             if not (exists[a] and exists[b]):
                 continue
-            _correct(J, k, a, b, position, angle, inv_mass, inv_inertia)
+            _correct(
+                J.kind[k], J.reference_angle[k], J.rigid[k], J.has_limit[k], J.lower[k],
+                J.upper[k], J.length[k], axis[k, 0], axis[k, 1], local_a[k, 0], local_a[k, 1],
+                local_b[k, 0], local_b[k, 1], a, b, position, angle, inv_mass, inv_inertia,
+            )  # fmt: skip
+    rot = _rotations(J, angle, exists)  # the final angles
     for k in range(m):
         a = J.a[k]
         b = J.b[k]
         error[k, 0] = 0.0
         error[k, 1] = 0.0
         if exists[a] and exists[b]:
-            error[k, 0], error[k, 1] = _error(J, k, a, b, position, angle)
+            sa, ca = _sin_cos_of(rot, angle, a)
+            sb, cb = _sin_cos_of(rot, angle, b)
+            error[k, 0], error[k, 1] = _error(
+                J.kind[k], J.reference_angle[k], J.rigid[k], J.spring[k], J.lower[k],
+                J.upper[k], J.length[k], axis[k, 0], axis[k, 1], local_a[k, 0], local_a[k, 1],
+                local_b[k, 0], local_b[k, 1], a, b, position, angle, sa, ca, sb, cb,
+            )  # fmt: skip
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
-def _separation(J, k, a, b, position, angle):
-    rax, ray = _arm(J.local_a, k, angle[a])
-    rbx, rby = _arm(J.local_b, k, angle[b])
+def _separation(lax, lay, lbx, lby, a, b, position, angle):
+    """The arms (m, world) of the anchors (lax, lay) in a's frame and (lbx, lby) in b's, and the
+    anchors' separation b - a (m, world)."""
+    rax, ray = _arm(lax, lay, angle[a])
+    rbx, rby = _arm(lbx, lby, angle[b])
     dx = position[b, 0] + rbx - position[a, 0] - rax
     dy = position[b, 1] + rby - position[a, 1] - ray
     return rax, ray, rbx, rby, dx, dy
@@ -554,27 +669,30 @@ def _move(position, angle, inv_mass, inv_inertia, a, b, px, py, la, lb):
     angle[b] = _wrap(angle[b] + lb * inv_inertia[b])
 
 
-@numba.njit(cache=True, nogil=True)
-def _correct(J, k, a, b, position, angle, inv_mass, inv_inertia):
+@numba.njit(cache=True, nogil=True, inline="always")
+def _correct(
+    kind, reference, rigid, has_limit, lower, upper, length, axis_x, axis_y, lax, lay, lbx, lby,
+    a, b, position, angle, inv_mass, inv_inertia,
+):  # fmt: skip
+    """One joint's position correction (`correct_joint_positions`), its table row as scalars."""
     ma = inv_mass[a]
     ia = inv_inertia[a]
     mb = inv_mass[b]
     ib = inv_inertia[b]
-    kind = J.kind[k]
     if kind == REVOLUTE or kind == WELD:
-        q = _wrap(angle[b] - angle[a] - J.reference_angle[k])
+        q = _wrap(angle[b] - angle[a] - reference)
         c = 0.0
-        if kind == WELD and J.rigid[k]:
+        if kind == WELD and rigid:
             c = q
-        elif kind == REVOLUTE and J.has_limit[k]:
-            if q < J.lower[k]:
-                c = q - J.lower[k]
-            elif q > J.upper[k]:
-                c = q - J.upper[k]
+        elif kind == REVOLUTE and has_limit:
+            if q < lower:
+                c = q - lower
+            elif q > upper:
+                c = q - upper
         if c != 0.0 and ia + ib > 0.0:
             lam = -_clamp(c, MAX_ANGULAR_CORRECTION) / (ia + ib)
             _move(position, angle, inv_mass, inv_inertia, a, b, 0.0, 0.0, lam, lam)
-        rax, ray, rbx, rby, dx, dy = _separation(J, k, a, b, position, angle)
+        rax, ray, rbx, rby, dx, dy = _separation(lax, lay, lbx, lby, a, b, position, angle)
         length = np.sqrt(dx * dx + dy * dy)
         if length > MAX_LINEAR_CORRECTION:  # capped, along the same direction
             scale = MAX_LINEAR_CORRECTION / length
@@ -588,17 +706,17 @@ def _correct(J, k, a, b, position, angle, inv_mass, inv_inertia):
             rax * py - ray * px, rbx * py - rby * px,
         )  # fmt: skip
     elif kind == DISTANCE:
-        rax, ray, rbx, rby, dx, dy = _separation(J, k, a, b, position, angle)
+        rax, ray, rbx, rby, dx, dy = _separation(lax, lay, lbx, lby, a, b, position, angle)
         d = np.sqrt(dx * dx + dy * dy)
         if d == 0.0:
             return
         c = 0.0
-        if J.rigid[k]:
-            c = d - J.length[k]
-        elif d < J.lower[k]:
-            c = d - J.lower[k]
-        elif d > J.upper[k]:
-            c = d - J.upper[k]
+        if rigid:
+            c = d - length
+        elif d < lower:
+            c = d - lower
+        elif d > upper:
+            c = d - upper
         if c == 0.0:
             return
         ux = dx / d
@@ -611,16 +729,16 @@ def _correct(J, k, a, b, position, angle, inv_mass, inv_inertia):
             position, angle, inv_mass, inv_inertia, a, b, lam * ux, lam * uy, lam * cra, lam * crb
         )
     else:  # PRISMATIC
-        rax, ray, rbx, rby, dx, dy = _separation(J, k, a, b, position, angle)
+        rax, ray, rbx, rby, dx, dy = _separation(lax, lay, lbx, lby, a, b, position, angle)
         s, co = sin_cos(angle[a])
-        ux = co * J.axis[k, 0] - s * J.axis[k, 1]
-        uy = s * J.axis[k, 0] + co * J.axis[k, 1]
+        ux = co * axis_x - s * axis_y
+        uy = s * axis_x + co * axis_y
         px = -uy
         py = ux
         s1 = (dx + rax) * py - (dy + ray) * px
         s2 = rbx * py - rby * px
         c1 = _clamp(px * dx + py * dy, MAX_LINEAR_CORRECTION)
-        c2 = _clamp(_wrap(angle[b] - angle[a] - J.reference_angle[k]), MAX_ANGULAR_CORRECTION)
+        c2 = _clamp(_wrap(angle[b] - angle[a] - reference), MAX_ANGULAR_CORRECTION)
         k22 = ia + ib
         if k22 == 0.0:
             k22 = 1.0
@@ -631,14 +749,14 @@ def _correct(J, k, a, b, position, angle, inv_mass, inv_inertia):
             position, angle, inv_mass, inv_inertia, a, b, i1 * px, i1 * py,
             i1 * s1 + i2, i1 * s2 + i2,
         )  # fmt: skip
-        if J.has_limit[k]:
-            rax, ray, rbx, rby, dx, dy = _separation(J, k, a, b, position, angle)
+        if has_limit:
+            rax, ray, rbx, rby, dx, dy = _separation(lax, lay, lbx, lby, a, b, position, angle)
             translation = ux * dx + uy * dy
             c = 0.0
-            if translation < J.lower[k]:
-                c = translation - J.lower[k]
-            elif translation > J.upper[k]:
-                c = translation - J.upper[k]
+            if translation < lower:
+                c = translation - lower
+            elif translation > upper:
+                c = translation - upper
             if c != 0.0:
                 a1 = (dx + rax) * uy - (dy + ray) * ux
                 a2 = rbx * uy - rby * ux
@@ -650,27 +768,33 @@ def _correct(J, k, a, b, position, angle, inv_mass, inv_inertia):
                 )  # fmt: skip
 
 
-@numba.njit(cache=True, nogil=True)
-def _error(J, k, a, b, position, angle):
-    rax, ray, rbx, rby, dx, dy = _separation(J, k, a, b, position, angle)
-    kind = J.kind[k]
-    q = _wrap(angle[b] - angle[a] - J.reference_angle[k])
+@numba.njit(cache=True, nogil=True, inline="always")
+def _error(
+    kind, reference, rigid, spring, lower, upper, length, axis_x, axis_y, lax, lay, lbx, lby, a,
+    b, position, angle, sa, ca, sb, cb,
+):  # fmt: skip
+    """One joint's remaining error (`correct_joint_positions`), its table row as scalars and
+    its bodies' (sin, cos) (sa, ca), (sb, cb)."""
+    rax, ray = _turned(lax, lay, sa, ca)
+    rbx, rby = _turned(lbx, lby, sb, cb)
+    dx = position[b, 0] + rbx - position[a, 0] - rax
+    dy = position[b, 1] + rby - position[a, 1] - ray
+    q = _wrap(angle[b] - angle[a] - reference)
     if kind == REVOLUTE:
         return np.sqrt(dx * dx + dy * dy), 0.0
     if kind == WELD:
-        return np.sqrt(dx * dx + dy * dy), 0.0 if J.spring[k] else q
+        return np.sqrt(dx * dx + dy * dy), 0.0 if spring else q
     if kind == DISTANCE:
         d = np.sqrt(dx * dx + dy * dy)
-        if J.rigid[k]:
-            return abs(d - J.length[k]), 0.0
-        if d < J.lower[k]:
-            return J.lower[k] - d, 0.0
-        if d > J.upper[k]:
-            return d - J.upper[k], 0.0
+        if rigid:
+            return abs(d - length), 0.0
+        if d < lower:
+            return lower - d, 0.0
+        if d > upper:
+            return d - upper, 0.0
         return 0.0, 0.0
-    s, c = sin_cos(angle[a])
-    ux = c * J.axis[k, 0] - s * J.axis[k, 1]
-    uy = s * J.axis[k, 0] + c * J.axis[k, 1]
+    ux = ca * axis_x - sa * axis_y
+    uy = sa * axis_x + ca * axis_y
     return abs(-uy * dx + ux * dy), q
 
 
@@ -690,6 +814,7 @@ def write_joint_rows(
 ):  # fmt: skip
     """One step's `isaac.engine.records.JointRows` fields (m, ...) from the last sub-step's
     scratch (impulses, axes) and the final poses (anchors), `error` from the position pass."""
+    rot = _rotations(J, angle, exists)
     for k in range(J.kind.shape[0]):
         t = jt[k]
         for c in range(JOINT_IMPULSES):
@@ -707,8 +832,10 @@ def write_joint_rows(
         limit[k] = t[JL] - t[JU]
         if t[ON] == 0.0 or not (exists[a] and exists[b]):
             continue
-        rax, ray = _arm(J.local_a, k, angle[a])
-        rbx, rby = _arm(J.local_b, k, angle[b])
+        sa, ca = _sin_cos_of(rot, angle, a)
+        sb, cb = _sin_cos_of(rot, angle, b)
+        rax, ray = _turned(J.local_a[k, 0], J.local_a[k, 1], sa, ca)
+        rbx, rby = _turned(J.local_b[k, 0], J.local_b[k, 1], sb, cb)
         anchor_a[k, 0] = position[a, 0] + rax
         anchor_a[k, 1] = position[a, 1] + ray
         anchor_b[k, 0] = position[b, 0] + rbx

@@ -66,7 +66,7 @@ class Measure:
     """The metrics of one run, fed the initial record (`__init__`) and then each batch."""
 
     def __init__(self, sim, metrics, final_bodies) -> None:
-        from isaac.app.tradeoff.trajectory import _concrete_planes
+        from isaac.app.tradeoff.trajectory import _concrete_discs, _concrete_planes
 
         self.metrics = tuple(metrics)
         self.final_bodies = tuple(final_bodies)
@@ -80,7 +80,9 @@ class Measure:
         self.contact_steps = 0
         self.movable = ~np.asarray(self.model.concrete)
         # concrete bodies never move: their edges in the world frame, once
-        self.planes = _concrete_planes(self.model, sim.state) if "tunneled" in self.metrics else []
+        tunneling = "tunneled" in self.metrics
+        self.planes = _concrete_planes(self.model, sim.state) if tunneling else []
+        self.discs = _concrete_discs(self.model, sim.state) if tunneling else []
         self._state0 = sim.state
         self._boxes = None
         self.tunneled = np.zeros(self.model.n_bodies, dtype=bool)
@@ -94,7 +96,7 @@ class Measure:
         if total:
             # every contact row of the batch at once (a max is exact in any order)
             self.max_depth = max(self.max_depth, float(batch.all_contacts().depth.max()))
-        if self.planes:
+        if self.planes or self.discs:
             self._tunneling(batch)
         self.last = batch.record(batch.steps - 1)
 
@@ -102,11 +104,11 @@ class Measure:
         """The box that bounds each concrete body (widened far past rounding): a centre's path
         whose own box misses it misses the polygon, so only the paths that meet it need be
         clipped (the same answer; in a pile the bodies rest beside the walls, and few paths
-        come near them)."""
+        come near them). One box per concrete polygon, in `_concrete_planes`' order."""
         if self._boxes is None:
             self._boxes = []
             state = self._state0
-            for i in np.flatnonzero(self.model.concrete):
+            for i in np.flatnonzero(self.model.concrete & (self.model.vertex_count > 1)):
                 k = int(self.model.vertex_count[i])
                 angle = float(state.angle[i])
                 c, s = math.cos(angle), math.sin(angle)  # as _concrete_planes turns them
@@ -126,7 +128,8 @@ class Measure:
         e0 = np.concatenate([np.asarray(self.last.exists)[None], e1[:-1]])
         a, b = p0.reshape(-1, 2), p1.reshape(-1, 2)
         if a.shape[0] * len(self.planes) < PREFILTER_PATHS:  # few paths: clip them all
-            crossed = _crossed_concrete(self.planes, a, b).reshape(-1, n) & e0 & e1 & self.movable
+            crossed = _crossed_concrete(self.planes, a, b, self.discs).reshape(-1, n)
+            crossed &= e0 & e1 & self.movable
             self.tunneled |= crossed.any(axis=0)
             return
         x0, x1 = np.minimum(a[:, 0], b[:, 0]), np.maximum(a[:, 0], b[:, 0])
@@ -139,6 +142,8 @@ class Measure:
             near = np.flatnonzero(near)
             if near.size:
                 crossed[near] |= _crossed_concrete([plane], a[near], b[near])
+        if self.discs:  # concrete circles: a distance test per path, cheap enough for all
+            crossed |= _crossed_concrete([], a, b, self.discs)
         crossed = crossed.reshape(-1, n) & e0 & e1 & self.movable
         self.tunneled |= crossed.any(axis=0)
 

@@ -29,11 +29,17 @@ def _combine(rule: str, x: float, y: float) -> float:
     return {"max": max(x, y), "min": min(x, y), "mean": 0.5 * (x + y), "product": x * y}[rule]
 
 
-def _flat_extreme(
-    verts: np.ndarray, axis: int, top: bool, tol: float
-) -> tuple[float, float, float] | None:
-    """The extreme coordinate along `axis` if it is taken by a whole edge (two or more vertices
-    within `tol`): (coordinate, low, high) of that edge's extent along the other axis."""
+def _flat_extreme(body, axis: int, top: bool, tol: float) -> tuple[float, float, float] | None:
+    """A body's extreme coordinate along `axis` (0: x, 1: y; m, world, at its starting pose) if a
+    flat face takes it: (coordinate, low, high) of that face's extent along the other axis. A
+    polygon's face is a whole edge (two or more vertices within `tol`); a circle's is the one
+    point of its rim on the axis through its centre (low = high), where a contact's normal
+    passes through the centre, as a flat face's does through a face-centred body."""
+    if body.circle is not None:
+        centre = body.position[axis]
+        across = float(body.position[1 - axis])
+        return float(centre + body.circle if top else centre - body.circle), across, across
+    verts = _world_vertices(body)
     coord = verts[:, axis]
     extreme = coord.max() if top else coord.min()
     on = np.abs(coord - extreme) <= tol
@@ -43,6 +49,13 @@ def _flat_extreme(
     return float(extreme), float(other.min()), float(other.max())
 
 
+def _size(body) -> float:
+    """The largest |coordinate| of a body's outline (m, world): the scale of its tolerances."""
+    if body.circle is not None:
+        return float(max(abs(body.position[0]), abs(body.position[1])) + body.circle)
+    return float(np.abs(_world_vertices(body)).max())
+
+
 ANALYTIC_MODELS = ("ballistic", "drop", "head_on")
 
 
@@ -50,27 +63,41 @@ def analytic_model(scene: Scene) -> str | None:
     """Which closed form solves `scene`, or None: "ballistic" (one body, nothing to hit),
     "drop" (one body falling flat, without spin, onto level concrete ground under vertical
     gravity) or "head_on" (two bodies, no gravity, moving along x, faces vertical and centred on
-    the same line). Detected from the bodies; a scene may also name it (`analytic: {model: ...}`).
+    the same line). A circle's rim point counts as a face (`_flat_extreme`). Detected from the
+    bodies; a scene may also name it (`analytic: {model: ...}`). None for a scene with joints
+    (its bodies are held, not free) or with bodies that enter or leave.
     """
     declared = (scene.analytic or {}).get("model") if scene.analytic else None
+    found = _detect(scene)
+    if declared is not None and declared != found:
+        seen = "no known closed form" if found is None else f"the closed form {found!r}"
+        if scene.joints:
+            seen += " (it has joints)"
+        raise TradeoffError(
+            f"the scene declares analytic model {declared!r} but its bodies fit "
+            f"{seen} (known: {', '.join(ANALYTIC_MODELS)})"
+        )
+    return found
+
+
+def _detect(scene: Scene) -> str | None:
     w = scene.world
     bodies = scene.bodies
-    if any(b.enters_at > 0.0 or b.leaves_at is not None for b in bodies):
+    if scene.joints or any(b.enters_at > 0.0 or b.leaves_at is not None for b in bodies):
         return None
     moving = [b for b in bodies if not b.concrete]
     fixed = [b for b in bodies if b.concrete]
-    found = None
     if len(moving) == 1 and not fixed:
-        found = "ballistic"
-    elif len(moving) == 1 and len(fixed) == 1 and w.gravity[0] == 0.0 and w.gravity[1] < 0.0:
+        return "ballistic"
+    if len(moving) == 1 and len(fixed) == 1 and w.gravity[0] == 0.0 and w.gravity[1] < 0.0:
         body, ground = moving[0], fixed[0]
-        vb, vg = _world_vertices(body), _world_vertices(ground)
-        tol = 1e-9 * (1.0 + float(np.abs(vb).max()))
-        bottom = _flat_extreme(vb, 1, False, tol)
-        top = _flat_extreme(vg, 1, True, tol)
+        tol = 1e-9 * (1.0 + _size(body))
+        bottom = _flat_extreme(body, 1, False, tol)
+        top = _flat_extreme(ground, 1, True, tol)
         if (
             bottom
             and top
+            and top[1] < top[2]  # a flat ground, not a circle's rim
             and body.angular_velocity == 0.0
             and bottom[0] >= top[0] - tol
             and (body.velocity[0] == 0.0 or not w.friction)
@@ -80,12 +107,12 @@ def analytic_model(scene: Scene) -> str | None:
             shift = body.velocity[0] * t_end
             lo, hi = bottom[1] + min(0.0, shift), bottom[2] + max(0.0, shift)
             if lo >= top[1] and hi <= top[2]:
-                found = "drop"
-    elif len(moving) == 2 and not fixed and w.gravity == (0.0, 0.0):
+                return "drop"
+        return None
+    if len(moving) == 2 and not fixed and w.gravity == (0.0, 0.0):
         a, b = sorted(moving, key=lambda x: x.position[0])
-        va, vb = _world_vertices(a), _world_vertices(b)
-        tol = 1e-9 * (1.0 + float(max(np.abs(va).max(), np.abs(vb).max())))
-        face_a, face_b = _flat_extreme(va, 0, True, tol), _flat_extreme(vb, 0, False, tol)
+        tol = 1e-9 * (1.0 + max(_size(a), _size(b)))
+        face_a, face_b = _flat_extreme(a, 0, True, tol), _flat_extreme(b, 0, False, tol)
         if (
             face_a
             and face_b
@@ -98,14 +125,8 @@ def analytic_model(scene: Scene) -> str | None:
             and abs(face_b[1] + face_b[2] - 2 * b.position[1]) <= tol
             and face_a[0] <= face_b[0] + tol
         ):
-            found = "head_on"
-    if declared is not None and declared != found:
-        seen = "no known closed form" if found is None else f"the closed form {found!r}"
-        raise TradeoffError(
-            f"the scene declares analytic model {declared!r} but its bodies fit "
-            f"{seen} (known: {', '.join(ANALYTIC_MODELS)})"
-        )
-    return found
+            return "head_on"
+    return None
 
 
 def analytic_trajectory(scene: Scene, times: np.ndarray) -> Trajectory:
@@ -146,7 +167,7 @@ def analytic_trajectory(scene: Scene, times: np.ndarray) -> Trajectory:
         e = _combine(w.restitution_rule, body.restitution, ground.restitution)
         gy = -w.gravity[1]
         rest_y = body.position[1] - (
-            _world_vertices(body)[:, 1].min() - _world_vertices(ground)[:, 1].max()
+            _flat_extreme(body, 1, False, math.inf)[0] - _flat_extreme(ground, 1, True, math.inf)[0]
         )
         pos[:, i, 1], vel[:, i, 1] = _bounce_y(
             body.position[1], body.velocity[1], rest_y, gy, e, w.restitution_threshold, times
@@ -157,7 +178,7 @@ def analytic_trajectory(scene: Scene, times: np.ndarray) -> Trajectory:
             key=lambda k: scene.bodies[k].position[0],
         )
         a, b = scene.bodies[ia], scene.bodies[ib]
-        gap = _world_vertices(b)[:, 0].min() - _world_vertices(a)[:, 0].max()
+        gap = _flat_extreme(b, 0, False, math.inf)[0] - _flat_extreme(a, 0, True, math.inf)[0]
         closing = a.velocity[0] - b.velocity[0]
         if closing > 0.0:
             t_hit = max(gap, 0.0) / closing

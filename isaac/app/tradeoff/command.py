@@ -66,9 +66,10 @@ def register(subparsers) -> None:
     p.add_argument("--no-plot", action="store_true", help="do not write the plot")
     p.add_argument(
         "--second",
-        default="max_penetration_m",
-        choices=("max_penetration_m", "energy_error", "com_error_m"),
-        help="error shown in the plot's second panel",
+        default=None,
+        choices=("max_penetration_m", "energy_error", "com_error_m", "max_joint_error_m"),
+        help="error shown in the plot's second panel (default: max_joint_error_m for a scene "
+        "with joints, else max_penetration_m)",
     )
     p.add_argument("--markdown", action="store_true", help="print the table as Markdown")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
@@ -77,7 +78,7 @@ def register(subparsers) -> None:
 
 def cmd_tradeoff(args: argparse.Namespace) -> int:
     scene = load_scene(args.scene)
-    grid = parse_grid(args.grid, scene.world.dt)
+    grid = parse_grid(args.grid, scene.world.dt, joints=bool(scene.joints))
     reference = args.reference or ("analytic" if scene.analytic else "accurate")
     result = measure(
         scene,
@@ -104,7 +105,8 @@ def cmd_tradeoff(args: argparse.Namespace) -> int:
     if not args.no_plot:
         png_path = Path(args.png or f"{stem}_tradeoff.png")
         png_path.parent.mkdir(parents=True, exist_ok=True)
-        plot(result, png_path, second=args.second)
+        second = args.second or ("max_joint_error_m" if result.joints else "max_penetration_m")
+        plot(result, png_path, second=second)
         print(f"wrote {png_path}")
     diverged = [r for r in result.rows if r["diverged"]]
     for r in diverged:

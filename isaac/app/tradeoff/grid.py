@@ -78,13 +78,16 @@ def _check_setting(key: str, raw: str):
     return getattr(scene.world, key)
 
 
-def parse_grid(specs: list[str] | None, scene_dt: float) -> list[GridPoint]:
+def parse_grid(
+    specs: list[str] | None, scene_dt: float, *, joints: bool = False
+) -> list[GridPoint]:
     """Grid points from `--grid KEY=V1,V2` specs (the product of the axes).
 
     Keys: `preset` (seed, fast, balanced, accurate), `dt` (see `parse_dt`) and any world
     setting (`iterations=4,10,20`, `ccd=off,speculative`, ...). Without a `dt` axis the dt
     values are the scene's dt times 2, 1 and 1/2. Without any preset or setting axis the presets
-    are the axis; with setting axes but no preset the scene's own settings are the base.
+    are the axis (for a scene with `joints`, all but `seed`: its single pass has no joint rows);
+    with setting axes but no preset the scene's own settings are the base.
     """
     axes: dict[str, list] = {}
     for spec in specs or []:
@@ -117,7 +120,9 @@ def parse_grid(specs: list[str] | None, scene_dt: float) -> list[GridPoint]:
     if "dt" not in axes:
         axes["dt"] = [scene_dt * f for f in DEFAULT_DT_FACTORS]
     if len(axes) == 1:
-        axes["preset"] = list(PRESET_ORDER)
+        axes["preset"] = [
+            p for p in PRESET_ORDER if not (joints and PRESETS[p]["solver"] == "seed")
+        ]
     keys = [k for k in axes if k != "dt"]
     points = []
     for combo in itertools.product(*(axes[k] for k in keys)):

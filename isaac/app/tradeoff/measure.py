@@ -17,7 +17,7 @@ from isaac.app.tradeoff.trajectory import (
     time_runs,
     warm_up,
 )
-from isaac.scene import Scene
+from isaac.scene import Scene, checks
 
 COLUMNS = (
     "setting",
@@ -32,6 +32,7 @@ COLUMNS = (
     "com_error_m",
     "momentum_error_mps",
     "max_penetration_m",
+    "max_joint_error_m",
     "tunneled",
     "diverged",
     "pareto",
@@ -48,6 +49,7 @@ class TradeoffResult:
     sample_dt: float
     rows: list[dict]
     reference_row: dict
+    joints: bool = False  # the scene has joints (the table shows their largest error)
 
 
 def _pareto(points: list[tuple[float, float]]) -> list[bool]:
@@ -108,6 +110,10 @@ def measure(
         )
     duration = float(times[-1])
     model = build_model(scene)
+    for point in grid:  # refused before anything runs: a setting that cannot solve the scene
+        refusal = checks.joint_solver_problem(point.world(w, duration).solver, scene.joints)
+        if refusal is not None:
+            raise TradeoffError(f"--grid {point.label}: {refusal}")
     bar = None
     if progress:
         from tqdm import tqdm
@@ -142,6 +148,7 @@ def measure(
                 setting=ref_point.label,
                 dt=ref_dt,
                 max_penetration_m=ref.max_depth,
+                max_joint_error_m=ref.max_joint_error,
                 tunneled=len(ref.tunneled),
             )
         else:
@@ -165,6 +172,7 @@ def measure(
             row.update(compare(scene, model, run, ref, ref_series))
             row.update(
                 max_penetration_m=run.max_depth,
+                max_joint_error_m=run.max_joint_error,
                 tunneled=len(run.tunneled),
                 diverged=run.error or "",
                 ms_per_step=math.nan,
@@ -205,6 +213,7 @@ def measure(
         sample_dt=sample_dt,
         rows=rows,
         reference_row=ref_row,
+        joints=bool(scene.joints),
     )
 
 

@@ -54,12 +54,19 @@ TABLE_COLUMNS = (
 )
 
 
+JOINT_COLUMN = ("max_joint_error_m", "joint err m")  # shown for a scene with joints
+
+
 def format_table(result: TradeoffResult, *, markdown: bool = False) -> str:
-    """The table as aligned text (or a Markdown table), reference row first."""
-    header = [title for _, title in TABLE_COLUMNS]
+    """The table as aligned text (or a Markdown table), reference row first; a scene with
+    joints also gets the largest joint error of each run."""
+    columns = list(TABLE_COLUMNS)
+    if result.joints:
+        columns.insert(columns.index(("tunneled", "tunnel")), JOINT_COLUMN)
+    header = [title for _, title in columns]
     body = []
     for row in [result.reference_row] + result.rows:
-        cells = [_fmt(row.get(key, ""), key) for key, _ in TABLE_COLUMNS]
+        cells = [_fmt(row.get(key, ""), key) for key, _ in columns]
         if row.get("diverged"):
             cells[-1] = "DIVERGED"
         body.append(cells)
@@ -87,6 +94,7 @@ def plot(result: TradeoffResult, path, *, second: str = "max_penetration_m") -> 
         "max_penetration_m": "max penetration (m)",
         "energy_error": "energy error (rel.)",
         "com_error_m": "centre-of-mass error (m)",
+        "max_joint_error_m": "largest joint error (m)",
     }
     fig, axes = plt.subplots(1, 2, figsize=(10.5, 4.2), dpi=90)
     labels = list(dict.fromkeys(r["setting"] for r in result.rows))

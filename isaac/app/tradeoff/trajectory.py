@@ -21,8 +21,10 @@ class Trajectory:
 
     times: (S,) s. position, velocity: (S, n, 2) world (m, m/s). angle, angular_velocity: (S, n).
     exists: (S, n) bool. max_depth: largest penetration (m) any contact had during the run.
-    tunneled: names of bodies whose centre crossed a concrete body. error: why it stopped early
-    (a SimulationError message), else None.
+    max_joint_error: the largest position error (m) a joint was left with after a step's
+    position pass (`JointRows.error`, column 0), 0 without joints. tunneled: names of bodies
+    whose centre crossed a concrete body. error: why it stopped early (a SimulationError
+    message), else None.
     """
 
     times: np.ndarray
@@ -32,6 +34,7 @@ class Trajectory:
     angular_velocity: np.ndarray
     exists: np.ndarray
     max_depth: float = 0.0
+    max_joint_error: float = 0.0
     tunneled: list[str] = field(default_factory=list)
     error: str | None = None
 
@@ -49,9 +52,10 @@ class Trajectory:
 
 
 def _concrete_planes(model, state) -> list[tuple[np.ndarray, np.ndarray]]:
-    """(normals (k, 2), offsets (k,)) of the edges of each concrete body in the world frame."""
+    """(normals (k, 2), offsets (k,)) of the edges of each concrete polygon in the world frame
+    (concrete circles: `_concrete_discs`)."""
     planes = []
-    for i in np.flatnonzero(model.concrete):
+    for i in np.flatnonzero(model.concrete & (model.vertex_count > 1)):
         k = int(model.vertex_count[i])
         c, s = math.cos(state.angle[i]), math.sin(state.angle[i])
         rot = np.array([[c, -s], [s, c]])
@@ -61,12 +65,22 @@ def _concrete_planes(model, state) -> list[tuple[np.ndarray, np.ndarray]]:
     return planes
 
 
-def _crossed_concrete(planes, p0: np.ndarray, p1: np.ndarray) -> np.ndarray:
-    """(m,) bool: the segment p0 -> p1 of each body's centre meets some concrete polygon.
+def _concrete_discs(model, state) -> list[tuple[np.ndarray, float]]:
+    """(centre (2,) m, radius m) of each concrete circle."""
+    return [
+        (state.position[i].copy(), float(model.radius[i]))
+        for i in np.flatnonzero(model.concrete & (model.vertex_count == 1))
+    ]
+
+
+def _crossed_concrete(planes, p0: np.ndarray, p1: np.ndarray, discs=()) -> np.ndarray:
+    """(m,) bool: the segment p0 -> p1 of each body's centre meets some concrete polygon or
+    disc.
 
     Cyrus-Beck clipping of the segment against each convex polygon (inside: n . x <= d on
-    every edge). A body resting on a concrete body never has its centre inside it, so a hit
-    means the body went (at least half) through.
+    every edge); for a disc, the segment's closest point to its centre within its radius. A
+    body resting on a concrete body never has its centre inside it, so a hit means the body
+    went (at least half) through.
     """
     hit = np.zeros(p0.shape[0], dtype=bool)
     d = p1 - p0
@@ -83,6 +97,13 @@ def _crossed_concrete(planes, p0: np.ndarray, p1: np.ndarray) -> np.ndarray:
             t_in = np.where(den < 0.0, np.maximum(t_in, t), t_in)
             t_out = np.where(den > 0.0, np.minimum(t_out, t), t_out)
         hit |= ~outside & (t_in <= t_out)
+    length2 = np.einsum("ij,ij->i", d, d)
+    for centre, r in discs:
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t = np.clip(np.einsum("ij,ij->i", centre - p0, d) / length2, 0.0, 1.0)
+        t = np.where(length2 > 0.0, t, 0.0)
+        closest = p0 + t[:, None] * d - centre
+        hit |= np.einsum("ij,ij->i", closest, closest) < r * r
     return hit
 
 
@@ -96,7 +117,8 @@ def simulate(scene: Scene, times: np.ndarray, *, check: bool = True) -> Trajecto
     """Run `scene` for `scene.world.steps` steps; sample the state at `times` (linear
     interpolation between the two steps around a time that is not a multiple of dt).
 
-    With `check`, also tracks the largest contact depth and tunneling through concrete bodies.
+    With `check`, also tracks the largest contact depth, the largest joint error and tunneling
+    through concrete bodies.
     A SimulationError ends the run: samples after it are NaN and `error` says why.
     """
     from isaac.engine.simulation import Simulation
@@ -118,6 +140,7 @@ def simulate(scene: Scene, times: np.ndarray, *, check: bool = True) -> Trajecto
     frac = np.clip(where - lo, 0.0, 1.0)
     frac[np.abs(frac) < 1e-9] = 0.0
     planes = _concrete_planes(sim.model, sim.state) if check else []
+    discs = _concrete_discs(sim.model, sim.state) if check else []
     movable = ~sim.model.concrete
     tunneled = np.zeros(n, dtype=bool)
     prev = sim.record()
@@ -141,10 +164,13 @@ def simulate(scene: Scene, times: np.ndarray, *, check: bool = True) -> Trajecto
             if check:
                 if len(rec.contacts):
                     out.max_depth = max(out.max_depth, float(rec.contacts.depth.max()))
-                if planes:
+                if rec.joints is not None and len(rec.joints.error):
+                    worst = float(rec.joints.error[:, 0].max())
+                    out.max_joint_error = max(out.max_joint_error, worst)
+                if planes or discs:
                     alive = movable & rec.exists & prev.exists
-                    crossed = _crossed_concrete(planes, prev.position, rec.position) & alive
-                    tunneled |= crossed
+                    crossed = _crossed_concrete(planes, prev.position, rec.position, discs)
+                    tunneled |= crossed & alive
             while k < s_count and lo[k] <= step_index:
                 if lo[k] == step_index:
                     if frac[k] == 0.0:
