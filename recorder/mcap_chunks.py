@@ -31,7 +31,7 @@ from mcap.opcode import Opcode
 from mcap.records import MessageIndex
 from mcap.writer import Writer
 
-from recorder.mcap_pack import scan_records
+from recorder.mcap_pack import index_entries, scan_records
 
 
 class PackedMessageIndex(MessageIndex):
@@ -43,22 +43,15 @@ class PackedMessageIndex(MessageIndex):
         super().__init__(channel_id=channel_id, records=[])
         self.parts: list = []
 
-    def append(self, log_time: np.ndarray, offset: np.ndarray) -> None:
-        part = np.empty((len(log_time), 2), dtype="<u8")
-        part[:, 0] = log_time
-        part[:, 1] = offset
-        self.parts.append(part)
-
     def append_one(self, log_time: int, offset: int) -> None:
         if not self.parts or not isinstance(self.parts[-1], list):
             self.parts.append([])
         self.parts[-1].append((log_time, offset))
 
     def write(self, stream) -> None:
-        entries = np.concatenate(
-            [np.array(p, dtype="<u8").reshape(-1, 2) for p in self.parts]
-            or [np.empty((0, 2), dtype="<u8")]
-        )
+        parts = [p if isinstance(p, np.ndarray) else np.array(p, dtype="<u8") for p in self.parts]
+        entries = np.concatenate(parts) if parts else np.empty((0, 2), dtype="<u8")
+        entries = entries.astype("<u8", copy=False)
         stream.start_record(Opcode.MESSAGE_INDEX)
         stream.write2(self.channel_id)
         stream.write4(entries.nbytes)
@@ -87,22 +80,21 @@ class PackedChunkBuilder(ChunkBuilder):
         self.num_messages += 1
         message.write(self.record_writer)
 
-    def add_records(self, data, starts, channel, log_time, order) -> None:
-        """The records ``data`` (bytes-like, their starts at ``starts`` less ``starts[0]``) of
-        channels ``channel`` at ``log_time``; order: the channels in the order they first
-        appear."""
-        base = self.record_writer.count
-        lt_min, lt_max = int(log_time.min()), int(log_time.max())
+    def add_records(self, data, order, counts, entries, lt_min: int, lt_max: int) -> None:
+        """Whole Message records ``data`` (bytes-like), whose channels are ``order`` in the
+        order they first appear, ``counts`` records each, their message-index entries
+        ``entries`` grouped in that order (`recorder.mcap_pack.index_entries`, offsets from
+        this chunk's current end), log times from ``lt_min`` to ``lt_max``."""
         if self.num_messages == 0:
             self.message_start_time = lt_min
         else:
             self.message_start_time = min(self.message_start_time, lt_min)
         self.message_end_time = max(self.message_end_time, lt_max)
-        offsets = starts - starts[0] + base
-        for ch in order:
-            mine = channel == ch
-            self._index(int(ch)).append(log_time[mine], offsets[mine])
-        self.num_messages += len(starts)
+        at = 0
+        for ch, k in zip(order.tolist(), counts.tolist()):
+            self._index(ch).parts.append(entries[at : at + k])
+            at += k
+        self.num_messages += at
         self.record_writer.write(data)
 
 
@@ -215,18 +207,18 @@ class RecordSink:
 
     def _enter(self, builder, view, starts, ends, channel, log_time, i, j) -> None:
         """Records i .. j - 1 into the open chunk, with the writer's statistics."""
-        ch, lt = channel[i:j], log_time[i:j]
-        first_seen = np.unique(ch, return_index=True)[1]
-        order = ch[np.sort(first_seen)]
-        builder.add_records(view[starts[i] : ends[j - 1]], starts[i:j], ch, lt, order)
+        order, counts, entries, lt_min, lt_max = index_entries(
+            channel, log_time, starts, i, j, builder.count
+        )
+        lt_min, lt_max = int(lt_min), int(lt_max)
+        builder.add_records(view[starts[i] : ends[j - 1]], order, counts, entries, lt_min, lt_max)
         stats = self.writer._Writer__statistics
-        lt_min, lt_max = int(lt.min()), int(lt.max())
         if stats.message_count == 0:
             stats.message_start_time = lt_min
         else:
             stats.message_start_time = min(stats.message_start_time, lt_min)
         stats.message_end_time = max(stats.message_end_time, lt_max)
-        counts = stats.channel_message_counts
-        for c in order:
-            counts[int(c)] += int(np.count_nonzero(ch == c))
+        per_channel = stats.channel_message_counts
+        for c, k in zip(order.tolist(), counts.tolist()):
+            per_channel[c] += k
         stats.message_count += j - i

@@ -39,6 +39,7 @@ from numba.extending import intrinsic, overload
 from recorder.pack import (
     _finite,
     _head,
+    _manifolds_ok,
     _varint,
     copy_bytes,
     manifold_counts,
@@ -496,17 +497,14 @@ class BatchPacker:
     def pack(self, buf, pos: int, lo: int, hi: int, batch, plan: BatchPlan):
         """Steps lo .. hi - 1 of ``batch`` as records from byte ``pos`` of ``buf`` (uint8, room
         for ``plan.sizes[lo:hi]``): (steps packed up to, end byte, why: `pack_records`)."""
-        joints = batch._joints
-        if joints is None:
-            joints = _no_joints(batch.steps)
         c = self.channels
         hash_at = np.empty(batch.steps, dtype=np.int64)
-        state = (batch.position, batch.angle, batch.velocity, batch.angular_velocity, batch.exists)
+        state, offsets, rows, joints = batch_arguments(batch)
         done, end, why = pack_records(
             buf, pos, lo, hi, batch.first, batch.dt, plan.log_times,
             (c.bodies, c.contacts, c.joints, c.stats), plan.world, plan.world_at, state,
-            batch.offsets, batch.row_arrays, tuple(joints), self.mass, self.inertia,
-            self.concrete, *self.gravity, self.sha256, hash_at,
+            offsets, rows, joints, self.mass, self.inertia, self.concrete, *self.gravity,
+            self.sha256, hash_at,
         )  # fmt: skip
         if self.sha256 == 0:
             fill_hashes(buf, lo, done, hash_at, state)
@@ -565,3 +563,86 @@ def one_step_batch(record, dt: float) -> _OneStep:
     """``record`` as a batch of one step for `BatchPacker` (no copies for a record the engine
     made)."""
     return _OneStep(record, dt)
+
+
+@numba.njit(cache=True, nogil=True)
+def index_entries(channel, log_time, starts, i, j, base):
+    """What records i .. j - 1 (`scan_records`' arrays) add to a chunk that holds ``base``
+    bytes before them: the channels in the order they first appear, how many records each,
+    the message-index entries (log_time, offset in the chunk) grouped by channel in that order
+    (uint64, (j - i, 2)), and the least and greatest log time."""
+    count = j - i
+    order = np.empty(count, dtype=np.int64)
+    counts = np.zeros(count, dtype=np.int64)
+    rank = np.empty(count, dtype=np.int64)
+    kinds = 0
+    lt_min = log_time[i]
+    lt_max = log_time[i]
+    for r in range(i, j):
+        c = channel[r]
+        q = 0
+        while q < kinds and order[q] != c:
+            q += 1
+        if q == kinds:
+            order[q] = c
+            kinds += 1
+        counts[q] += 1
+        rank[r - i] = q
+        lt_min = min(lt_min, log_time[r])
+        lt_max = max(lt_max, log_time[r])
+    at = np.zeros(kinds, dtype=np.int64)
+    for q in range(1, kinds):
+        at[q] = at[q - 1] + counts[q - 1]
+    entries = np.empty((count, 2), dtype=np.uint64)
+    first = starts[i]
+    for r in range(i, j):
+        q = rank[r - i]
+        entries[at[q], 0] = log_time[r]
+        entries[at[q], 1] = starts[r] - first + base
+        at[q] += 1
+    return order[:kinds], counts[:kinds], entries, lt_min, lt_max
+
+
+@numba.njit(cache=True, nogil=True)
+def first_unfit(lo, hi, state, offsets, rows, joints):
+    """The first of steps lo .. hi - 1 of a batch that `pack_records` would stop at (a NaN or an
+    infinity in any float, contact rows that are not manifolds), or hi; arguments as
+    `pack_records` takes them. What a writer thread's caller checks, so that the packing
+    itself may run in the thread."""
+    position, angle, velocity, angular_velocity, exists = state
+    (substep, a, b, feature, slot, point, normal, depth, pair_depth, push_a, push_b, impulse,
+     tangent_impulse, restitution) = rows  # fmt: skip
+    j0, j1, j2, j3, j4, j5, j6, j7 = joints
+    for s in range(lo, hi):
+        r0 = offsets[s]
+        r1 = offsets[s + 1]
+        if j0.shape[1] and not _joints_finite(j0[s], j1[s], j2[s], j3[s], j4[s], j5[s], j6[s],
+                                              j7[s]):  # fmt: skip
+            return s
+        if not (
+            _finite(position[s]) and _finite(angle[s]) and _finite(velocity[s])
+            and _finite(angular_velocity[s]) and _finite(point[r0:r1]) and _finite(normal[r0:r1])
+            and _finite(depth[r0:r1]) and _finite(pair_depth[r0:r1]) and _finite(push_a[r0:r1])
+            and _finite(push_b[r0:r1]) and _finite(impulse[r0:r1])
+            and _finite(tangent_impulse[r0:r1]) and _finite(restitution[r0:r1])
+        ):  # fmt: skip
+            return s
+        manifolds = _manifolds_ok(
+            substep[r0:r1], a[r0:r1], b[r0:r1], feature[r0:r1], slot[r0:r1], normal[r0:r1],
+            pair_depth[r0:r1], push_a[r0:r1], push_b[r0:r1],
+        )  # fmt: skip
+        if not manifolds:
+            return s
+    return hi
+
+
+def batch_arguments(batch) -> tuple:
+    """(state, offsets, rows, joints) of a batch as `pack_records` and `first_unfit` take them."""
+    joints = batch._joints
+    state = (batch.position, batch.angle, batch.velocity, batch.angular_velocity, batch.exists)
+    return (
+        state,
+        batch.offsets,
+        batch.row_arrays,
+        tuple(_no_joints(batch.steps) if joints is None else joints),
+    )

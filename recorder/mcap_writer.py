@@ -643,9 +643,10 @@ class McapLogWriter:
         """Append the steps of an `isaac.engine.records.StepBatch`: their Message records
         packed by one compiled call (`recorder.mcap_pack.BatchPacker`, the /stats values and
         the state hash included) and entered into the chunk a
-        stretch at a time (`recorder.mcap_chunks.RecordSink`), in this thread or, with a writer
-        thread, in that one. Returns how many steps were written: all, or those before the
-        first one holding a NaN or an infinity (or contact rows that are not manifolds)."""
+        stretch at a time (`recorder.mcap_chunks.RecordSink`), in this thread; with a writer
+        thread, this thread only checks the batch (`recorder.mcap_pack.first_unfit`) and the
+        thread packs and enters it. Returns how many steps were written: all, or those before
+        the first one holding a NaN or an infinity (or contact rows that are not manifolds)."""
         if self._error is not None:
             raise LogError(f"writing {self.partial_path} failed: {self._error}")
         if not self.takes_batches:
@@ -660,22 +661,37 @@ class McapLogWriter:
                 record_channels(bool(self.joints)),
                 self.joints,
             )
-        plan = self._packer.plan(batch, self._last_exists)
-        buf = np.empty(int(plan.sizes.sum()), dtype=np.uint8)
-        done, end, _ = self._packer.pack(buf, 0, 0, batch.steps, batch, plan)
-        if done == 0:
-            return 0
-        self._last_exists = np.array(batch.exists[done - 1], dtype=bool)
-        self.steps_written += done
-        self.last_step = batch.first + done - 1
+        last_exists = self._last_exists
         if self._queue is None:
-            self._sink.append(buf, 0, end)
+            done = self._pack_and_enter(batch, batch.steps, last_exists)
         else:
-            with self._room:  # at most QUEUED_BYTES waiting for the thread (one batch at least)
-                while self._queued_bytes and self._queued_bytes + end > QUEUED_BYTES:
-                    self._room.wait()
-                self._queued_bytes += end
-            self._queue.put(_Packed(buf, end))
+            from recorder.mcap_pack import batch_arguments, first_unfit
+
+            done = int(first_unfit(0, batch.steps, *batch_arguments(batch)))
+            if done:
+                # the batch's own arrays (never written again) wait for the thread: at most
+                # QUEUED_BYTES of them, one batch at least
+                size = sum(a.nbytes for a in (batch.position, batch.velocity, *batch.row_arrays))
+                with self._room:
+                    while self._queued_bytes and self._queued_bytes + size > QUEUED_BYTES:
+                        self._room.wait()
+                    self._queued_bytes += size
+                self._queue.put(_Batch(batch, done, last_exists, size))
+        if done:
+            self._last_exists = np.array(batch.exists[done - 1], dtype=bool)
+            self.steps_written += done
+            self.last_step = batch.first + done - 1
+        return done
+
+    def _pack_and_enter(self, batch, steps: int, last_exists) -> int:
+        """Pack the batch's first ``steps`` steps (`recorder.mcap_pack.BatchPacker`, after a
+        step whose existence was ``last_exists``) and enter them into the chunks; returns how
+        many steps were packed (fewer at a NaN, an infinity or rows that are not manifolds)."""
+        plan = self._packer.plan(batch, last_exists)
+        buf = np.empty(int(plan.sizes[:steps].sum()), dtype=np.uint8)
+        done, end, _ = self._packer.pack(buf, 0, 0, steps, batch, plan)
+        if done:
+            self._sink.append(buf, 0, end)
         return done
 
     def write_records(self, buf: np.ndarray, start: int, end: int) -> None:
@@ -699,12 +715,13 @@ class McapLogWriter:
         return world_changed
 
     def _emit(self, item) -> None:
-        if isinstance(item, _Packed):
+        if isinstance(item, _Batch):
             try:
-                self._sink.append(item.buf, 0, item.end)
+                if self._pack_and_enter(item.batch, item.steps, item.last_exists) < item.steps:
+                    raise LogError(f"step {item.batch.first}: a checked batch failed to pack")
             finally:
                 with self._room:
-                    self._queued_bytes -= item.end
+                    self._queued_bytes -= item.size
                     self._room.notify_all()
             return
         record, stats, world_changed = item
@@ -820,16 +837,19 @@ class McapLogWriter:
                 self._file.close()
 
 
-# packed batches waiting for the writer thread, in bytes (a batch of the 503-body pile is about
-# 1 MB: the thread may lag by a few dozen batches, not by the whole run)
+# batches waiting for the writer thread, in bytes of their arrays (a batch of the 503-body pile
+# is about 1 MB: the thread may lag by a few dozen batches, not by the whole run)
 QUEUED_BYTES = 32 << 20
 
 
-class _Packed(NamedTuple):
-    """A batch's Message records for the writer thread: ``buf[:end]``."""
+class _Batch(NamedTuple):
+    """A checked batch for the writer thread: its first ``steps`` steps, after a step whose
+    existence was ``last_exists``; ``size``: its arrays' bytes."""
 
-    buf: np.ndarray
-    end: int
+    batch: object
+    steps: int
+    last_exists: np.ndarray | None
+    size: int
 
 
 def end_metadata(
