@@ -96,6 +96,7 @@ def record_channels(joints: bool):
     )
 
 
+@functools.cache
 def _versions() -> dict[str, str]:
     import platform
     import sys
@@ -152,7 +153,7 @@ def build_metadata(scene, scene_text: str, n_bodies: int) -> dict[str, str]:
     meta = {
         "format": FORMAT_NAME,
         "format_version": FORMAT_VERSION,
-        **_versions(),
+        **_versions(),  # (cached: the same for every log of a process, such as a sweep's)
         "scene_name": str(scene.name),
         "scene_sha256": hashlib.sha256(scene_text.encode("utf-8")).hexdigest(),
         "scene_attachment": SCENE_ATTACHMENT,
