@@ -5,7 +5,10 @@ counts and the /stats values, then the encoded `/bodies` and `/contacts` message
 library takes as they are; in a scene with joints, then a trailer (`joints_trailer`): the
 `/joints` message's byte count (uint64) and the message, encoded by
 `recorder.mcap_writer.encode_joints` (Python, not the compiled packer), padded to 8 bytes. A
-frame without joints has no trailer, so its bytes are what they were before joints.
+frame without joints has no trailer, so its bytes are what they were before joints. Only a log
+with the `/foxglove/scene` channel (which the child draws from records) and a big-endian
+machine still send MCAP frames: every other MCAP step leaves the simulating process as whole
+Message records (`recorder.mcap_pack`).
 
 Rerun frames (`recorder.pack.pack_rerun`, read back by
 `read_rerun_frame`): only what the recording draws, as raw native-endian arrays. The transport
@@ -392,29 +395,6 @@ def pack_batch(buf, pos: int, lo: int, hi: int, batch, sizes, model, gravity) ->
         np.ascontiguousarray(model.inertia, dtype=np.float64),
         np.ascontiguousarray(model.concrete, dtype=bool), *gravity,
     )  # fmt: skip
-
-
-def write_batch_to(writer, batch, model, gravity) -> int:
-    """The steps of an `isaac.engine.records.StepBatch` into an in-process
-    `recorder.mcap_writer.McapLogWriter` (one whose ``takes_batches``): their frames packed by
-    `pack_batch`, the writer processes' encoder, then written as a writer process writes them.
-    Returns how many steps were written: all, or those before the first one holding a NaN or
-    an infinity."""
-    sizes, trailers = batch_frame_sizes_with_joints(batch)
-    buf = np.empty(int(sizes[:, 2].sum()), dtype=np.uint8)
-    done = pack_batch(buf, 0, 0, batch.steps, batch, sizes, model, gravity)
-    at = 0
-    with memoryview(buf) as view:
-        for s in range(done):
-            size = int(sizes[s, 2])
-            put_trailer(buf, at + size - len(trailers[s]), trailers[s])
-            frame = Frame(view[at : at + size])
-            writer.write_messages(
-                frame.step, frame.time, frame.exists(), frame.bodies, frame.contacts,
-                {**frame.stats, "state_hash": frame.state_hash()}, frame.joints,
-            )  # fmt: skip
-            at += size
-    return done
 
 
 def batch_frame_sizes_with_joints(batch) -> tuple[np.ndarray, list[bytes]]:

@@ -28,6 +28,7 @@ import sys
 import threading
 from dataclasses import asdict
 from fractions import Fraction
+from typing import NamedTuple
 
 import numpy as np
 from mcap.writer import CompressionType, Writer
@@ -68,7 +69,34 @@ class LogClock:
     def __call__(self, step: int) -> int:
         return (2 * step * self.num + self.den) // (2 * self.den)
 
+    def times(self, first: int, count: int) -> np.ndarray:
+        """(count,) int64: the log times of steps first .. first + count - 1, each as
+        ``self(step)`` computes it (Python integers in numpy's loops: the products pass 2^63)."""
+        steps = np.arange(first, first + count, dtype=object)
+        return ((2 * self.num * steps + self.den) // (2 * self.den)).astype(np.int64)
 
+
+def channel_ids(joints: bool, foxglove: bool = False) -> dict[str, int]:
+    """The channel id of each topic of a log, as `McapLogWriter` registers them (ids count up
+    from 1 in `recorder.schema.TOPICS` order, ``/joints`` only with joints, then
+    ``/foxglove/scene``): what a writer process's parent packs records for."""
+    topics = [t for t in S.TOPICS if joints or t not in S.JOINT_TOPICS]
+    if foxglove:
+        topics.append("/foxglove/scene")
+    return {topic: k + 1 for k, topic in enumerate(topics)}
+
+
+def record_channels(joints: bool):
+    """`recorder.mcap_pack.Channels` of a log without the Foxglove channel."""
+    from recorder.mcap_pack import Channels
+
+    ids = channel_ids(joints)
+    return Channels(
+        ids["/world"], ids["/bodies"], ids["/contacts"], ids.get("/joints", 0), ids["/stats"]
+    )
+
+
+@functools.cache
 def _versions() -> dict[str, str]:
     import platform
     import sys
@@ -125,7 +153,7 @@ def build_metadata(scene, scene_text: str, n_bodies: int) -> dict[str, str]:
     meta = {
         "format": FORMAT_NAME,
         "format_version": FORMAT_VERSION,
-        **_versions(),
+        **_versions(),  # (cached: the same for every log of a process, such as a sweep's)
         "scene_name": str(scene.name),
         "scene_sha256": hashlib.sha256(scene_text.encode("utf-8")).hexdigest(),
         "scene_attachment": SCENE_ATTACHMENT,
@@ -446,14 +474,14 @@ class McapLogWriter:
     foxglove: a `recorder.foxglove.SceneEncoder` to also write ``/foxglove/scene``, or None.
     metadata: the ``isaac`` metadata record; default `build_metadata` of ``scene`` (a writer
         process gets it ready-made, with ``scene`` reduced to its name and ``world.dt``).
+    gravity: (gx, gy) m/s^2 for the /stats values of `write_batch`; default the scene's.
     joints: the scene's joints (`isaac.scene.JointSpec`s or `joint_table_rows`); default
         ``scene.joints`` when it has them. With joints, ``/world`` carries the joint table and
         every step a ``/joints`` message (the schema then holds the joint messages); without,
         the file is byte for byte what it was before joints existed.
-    background: encode in the caller's thread, but hand the bytes to a writer thread for the MCAP
-        bookkeeping, compression and file writes. Off by default: with the engine's kernels
-        holding the GIL it measured slower (GIL hand-offs), not faster. The bytes of the file
-        are the same either way.
+    background: a writer thread enters the messages into the MCAP chunks, compresses them and
+        writes the file: a batch's records packed in the caller (`write_batch`), a record's
+        messages encoded there too (`write`). The bytes of the file are the same either way.
     """
 
     def __init__(
@@ -470,6 +498,7 @@ class McapLogWriter:
         foxglove=None,
         metadata: dict[str, str] | None = None,
         joints=None,
+        gravity=None,
     ) -> None:
         if not 1 <= flush_every <= 100:
             raise ValueError("flush_every must be in 1..100")
@@ -482,6 +511,10 @@ class McapLogWriter:
             joints = getattr(scene, "joints", ())
         self.joints = joint_table_rows(joints)
         self.flush_every = flush_every
+        self.clock_dt = float(scene.world.dt)
+        if gravity is None:
+            gravity = getattr(scene.world, "gravity", None)
+        self.gravity = None if gravity is None else tuple(float(g) for g in gravity)
         self.clock = LogClock(scene.world.dt)
         self.steps_written = 0
         self.last_step: int | None = None
@@ -496,6 +529,11 @@ class McapLogWriter:
             self._file, chunk_size=chunk_size, compression=COMPRESSION[compression]
         )
         w = self._writer
+        from recorder.mcap_chunks import RecordSink
+
+        # every message goes through the sink, which closes the chunk and flushes after the
+        # first step and every flush_every steps, and takes whole stretches of packed records
+        self._sink = RecordSink(w, None, flush_every)
         w.start(profile=PROFILE, library=LIBRARY)
         # metadata and attachment first: they sit before every chunk and survive a crash
         if metadata is None:
@@ -530,8 +568,14 @@ class McapLogWriter:
             self._channel[FG.TOPIC] = w.register_channel(
                 topic=FG.TOPIC, message_encoding=S.MESSAGE_ENCODING, schema_id=fg_schema
             )
+        if self._channel != channel_ids(with_joints, foxglove is not None):
+            raise LogError("channel ids differ from recorder.mcap_writer.channel_ids")
+        self._sink.stats_channel = self._channel["/stats"]
+        self._packer = None  # recorder.mcap_pack.BatchPacker, made by the first write_batch
         self._file.flush()
         self._queue: queue.Queue | None = None
+        self._room = threading.Condition()  # the bytes of packed batches queued for the thread
+        self._queued_bytes = 0
         self._thread: threading.Thread | None = None
         if background:
             # bounded: at most ~2 flush intervals in memory; the caller waits if the disk lags
@@ -550,7 +594,7 @@ class McapLogWriter:
         """
         if self._error is not None:
             raise LogError(f"writing {self.partial_path} failed: {self._error}")
-        item = (record, stats, *self._count(record.step, record.exists))
+        item = (record, stats, self._count(record.step, record.exists))
         if self._queue is None:
             self._emit(item)
         else:
@@ -572,17 +616,9 @@ class McapLogWriter:
         with the frames `recorder.pack` encodes."""
         if self._queue is not None:
             raise LogError("write_messages is for a writer without a background thread")
-        world_changed, flush = self._count(step, exists)
+        world_changed = self._count(step, exists)
         self._add(
-            step,
-            time,
-            exists if world_changed else None,
-            bodies,
-            contacts,
-            stats,
-            None,
-            flush,
-            joints,
+            step, time, exists if world_changed else None, bodies, contacts, stats, None, joints
         )
 
     def _joints_message(self, record: StepRecord) -> bytes | None:
@@ -600,23 +636,96 @@ class McapLogWriter:
 
     @property
     def takes_batches(self) -> bool:
-        """Whether whole step batches may be written (`recorder.frames.write_batch_to`): not
-        with a writer thread (it takes records) nor with /foxglove/scene (drawn from records)."""
-        return self._queue is None and self.foxglove is None and sys.byteorder == "little"
+        """Whether whole step batches may be written (`write_batch`): not with /foxglove/scene
+        (drawn from records), and on little-endian machines (the compiled packer's)."""
+        return self.foxglove is None and self.gravity is not None and sys.byteorder == "little"
 
-    def _count(self, step: int, exists: np.ndarray) -> tuple[bool, bool]:
-        """Note one more step: whether existence changed (a ``/world`` message is due) and
-        whether the chunk closes after it (at once for the first step, where the schemas and
-        channels live, then every ``flush_every`` steps)."""
+    def write_batch(self, batch) -> int:
+        """Append the steps of an `isaac.engine.records.StepBatch`: their Message records
+        packed by one compiled call (`recorder.mcap_pack.BatchPacker`, the /stats values and
+        the state hash included) and entered into the chunk a
+        stretch at a time (`recorder.mcap_chunks.RecordSink`), in this thread; with a writer
+        thread, this thread only checks the batch (`recorder.mcap_pack.first_unfit`) and the
+        thread packs and enters it. Returns how many steps were written: all, or those before
+        the first one holding a NaN or an infinity (or contact rows that are not manifolds)."""
+        if self._error is not None:
+            raise LogError(f"writing {self.partial_path} failed: {self._error}")
+        if not self.takes_batches:
+            raise LogError("this MCAP writer takes records, not batches")
+        if self._packer is None:
+            from recorder.mcap_pack import BatchPacker
+
+            self._packer = BatchPacker(
+                self.model,
+                self.gravity,
+                self.clock_dt,
+                record_channels(bool(self.joints)),
+                self.joints,
+            )
+        last_exists = self._last_exists
+        if self._queue is None:
+            done = self._pack_and_enter(batch, batch.steps, last_exists)
+        else:
+            from recorder.mcap_pack import batch_arguments, first_unfit
+
+            done = int(first_unfit(0, batch.steps, *batch_arguments(batch)))
+            if done:
+                # the batch's own arrays (never written again) wait for the thread: at most
+                # QUEUED_BYTES of them, one batch at least
+                size = sum(a.nbytes for a in (batch.position, batch.velocity, *batch.row_arrays))
+                with self._room:
+                    while self._queued_bytes and self._queued_bytes + size > QUEUED_BYTES:
+                        self._room.wait()
+                    self._queued_bytes += size
+                self._queue.put(_Batch(batch, done, last_exists, size))
+        if done:
+            self._last_exists = np.array(batch.exists[done - 1], dtype=bool)
+            self.steps_written += done
+            self.last_step = batch.first + done - 1
+        return done
+
+    def _pack_and_enter(self, batch, steps: int, last_exists) -> int:
+        """Pack the batch's first ``steps`` steps (`recorder.mcap_pack.BatchPacker`, after a
+        step whose existence was ``last_exists``) and enter them into the chunks; returns how
+        many steps were packed (fewer at a NaN, an infinity or rows that are not manifolds)."""
+        plan = self._packer.plan(batch, last_exists)
+        buf = np.empty(int(plan.sizes[:steps].sum()), dtype=np.uint8)
+        done, end, _ = self._packer.pack(buf, 0, 0, steps, batch, plan)
+        if done:
+            self._sink.append(buf, 0, end)
+        return done
+
+    def write_records(self, buf: np.ndarray, start: int, end: int) -> None:
+        """Append whole steps already packed as Message records (`recorder.mcap_pack`) in
+        ``buf[start:end]`` (uint8), in this thread: what a writer process does with the records
+        its parent packs into shared memory."""
+        if self._queue is not None:
+            raise LogError("write_records is for a writer without a background thread")
+        steps, last = self._sink.append(buf, start, end)
+        if steps:
+            self.steps_written += steps
+            self.last_step = last
+
+    def _count(self, step: int, exists: np.ndarray) -> bool:
+        """Note one more step: whether existence changed (a ``/world`` message is due)."""
         world_changed = self._last_exists is None or not np.array_equal(exists, self._last_exists)
         if world_changed:
             self._last_exists = np.array(exists, dtype=bool)
         self.steps_written += 1
         self.last_step = step
-        return world_changed, self.steps_written == 1 or self.steps_written % self.flush_every == 0
+        return world_changed
 
     def _emit(self, item) -> None:
-        record, stats, world_changed, flush = item
+        if isinstance(item, _Batch):
+            try:
+                if self._pack_and_enter(item.batch, item.steps, item.last_exists) < item.steps:
+                    raise LogError(f"step {item.batch.first}: a checked batch failed to pack")
+            finally:
+                with self._room:
+                    self._queued_bytes -= item.size
+                    self._room.notify_all()
+            return
+        record, stats, world_changed = item
         if "state_hash" not in stats:
             stats = {**stats, "state_hash": state_hash(record)}
         self._add(
@@ -627,33 +736,30 @@ class McapLogWriter:
             encode_contacts(record),
             stats,
             record,
-            flush,
             self._joints_message(record),
         )
 
-    def _add(
-        self, step, time, world_exists, bodies, contacts, stats, record, flush, joints=None
-    ) -> None:
+    def _add(self, step, time, world_exists, bodies, contacts, stats, record, joints=None) -> None:
         """The step's messages (``/world`` first, with ``world_exists``, when given;
-        ``/foxglove/scene`` when enabled, from ``record``), then the chunk closed when
-        ``flush``. Uses nothing a later `write` changes: the writer thread runs behind."""
+        ``/foxglove/scene`` when enabled, from ``record``), then the chunk closed when one is
+        due (`recorder.mcap_chunks.RecordSink.end_step`). Uses nothing a later `write`
+        changes: the writer thread runs behind."""
         if self.joints and joints is None:  # before any of the step's messages
             raise LogError(f"step {step}: no /joints message for a scene with joints")
         ch = self._channel
         t = self.clock(step)
-        add = self._writer.add_message
+        add = self._sink.add
         if world_exists is not None:
             world = encode_world(self.model, step, time, world_exists, self.joints)
-            add(ch["/world"], t, world, t, step)
-        add(ch["/bodies"], t, bodies, t, step)
-        add(ch["/contacts"], t, contacts, t, step)
+            add(ch["/world"], t, world, step)
+        add(ch["/bodies"], t, bodies, step)
+        add(ch["/contacts"], t, contacts, step)
         if joints is not None:
-            add(ch["/joints"], t, joints, t, step)
-        add(ch["/stats"], t, encode_stats(step, time, stats), t, step)
+            add(ch["/joints"], t, joints, step)
+        add(ch["/stats"], t, encode_stats(step, time, stats), step)
         if self.foxglove is not None:
-            add(ch["/foxglove/scene"], t, self.foxglove.encode(record, t), t, step)
-        if flush:
-            self._writer.flush()
+            add(ch["/foxglove/scene"], t, self.foxglove.encode(record, t), step)
+        self._sink.end_step()
 
     def _work(self) -> None:
         assert self._queue is not None
@@ -730,6 +836,21 @@ class McapLogWriter:
                     os.fsync(self._file.fileno())
             finally:
                 self._file.close()
+
+
+# batches waiting for the writer thread, in bytes of their arrays (a batch of the 503-body pile
+# is about 1 MB: the thread may lag by a few dozen batches, not by the whole run)
+QUEUED_BYTES = 32 << 20
+
+
+class _Batch(NamedTuple):
+    """A checked batch for the writer thread: its first ``steps`` steps, after a step whose
+    existence was ``last_exists``; ``size``: its arrays' bytes."""
+
+    batch: object
+    steps: int
+    last_exists: np.ndarray | None
+    size: int
 
 
 def end_metadata(

@@ -129,12 +129,15 @@ def _head(buf, at, step, time):
     at = _varint(buf, at, 1 << 3)
     at = _varint(buf, at, step)
     buf[at] = (2 << 3) | 1
-    t = np.empty(1, dtype=np.float64)
-    t[0] = time
-    tb = t.view(np.uint8)
-    for i in range(8):
-        buf[at + 1 + i] = tb[i]
+    put_double(buf, at + 1, time)
     return at + 9
+
+
+@numba.njit(cache=True, nogil=True)
+def put_double(buf, at, value):
+    """``value``'s 8 bytes (host order: little-endian) at ``buf[at:]``, whatever the alignment
+    (a view of the bytes: no array allocated, which cost more than the write)."""
+    buf[at : at + 8].view(np.float64)[0] = value
 
 
 @numba.njit(cache=True, nogil=True)
@@ -152,10 +155,11 @@ def _field(buf, at, number, nbytes, offsets, k):
 
 @numba.njit(cache=True, nogil=True)
 def _finite(src):
-    flat = src.ravel()
+    # .flat, not .ravel(): a ravel's reshape calls into numba's C helper, 40-50 ns a call,
+    # which was most of the cost of checking a small step's thirteen arrays
     finite = True
-    for i in range(flat.size):
-        finite &= np.isfinite(flat[i])
+    for v in src.flat:
+        finite &= np.isfinite(v)
     return finite
 
 
@@ -403,12 +407,155 @@ def _starts(slot, k):
 
 
 @numba.njit(cache=True, nogil=True)
-def _gather(src, starts):
-    """src's rows at ``starts`` (a manifold's fields are its first row's), C-contiguous."""
-    out = np.empty((starts.shape[0],) + src.shape[1:], dtype=src.dtype)
-    for j in range(starts.shape[0]):
-        out[j] = src[starts[j]]
-    return out
+def _put_picked(buf, at, src, rows):
+    """src's (k,) values at ``rows`` (a manifold's fields are its first row's) as packed values
+    at ``buf[at:]``, written in place (nothing when ``at`` < 0: the field is left out)."""
+    if at < 0:
+        return
+    nbytes = rows.shape[0] * src.itemsize
+    if at + nbytes > buf.size:
+        raise IndexError("pack_frame: a field runs past the buffer")
+    dst = buf[at : at + nbytes].view(src.dtype)
+    for j in range(rows.shape[0]):
+        dst[j] = src[rows[j]]
+
+
+@numba.njit(cache=True, nogil=True)
+def _put_picked_pairs(buf, at, src, rows):
+    """`_put_picked` of a (k, 2) float64 array (x0, y0, x1, y1, ...)."""
+    if at < 0:
+        return
+    nbytes = rows.shape[0] * 16
+    if at + nbytes > buf.size:
+        raise IndexError("pack_frame: a field runs past the buffer")
+    dst = buf[at : at + nbytes].view(np.float64)
+    for j in range(rows.shape[0]):
+        dst[2 * j] = src[rows[j], 0]
+        dst[2 * j + 1] = src[rows[j], 1]
+
+
+@numba.njit(cache=True, nogil=True)
+def _int32s(buf, at, count):
+    """``count`` int32 values at ``buf[at:]``, as a view to write into."""
+    if at + 4 * count > buf.size:
+        raise IndexError("pack_frame: a field runs past the buffer")
+    return buf[at : at + 4 * count].view(np.int32)
+
+
+@numba.njit(cache=True, nogil=True)
+def pack_messages(
+    buf,
+    bodies_at,
+    contacts_at,
+    step,
+    time,
+    n,
+    m,
+    position,
+    angle,
+    velocity,
+    angular_velocity,
+    exists,
+    substep,
+    a,
+    b,
+    feature,
+    slot,
+    point,
+    normal,
+    depth,
+    pair_depth,
+    push_a,
+    push_b,
+    impulse,
+    tangent_impulse,
+    restitution,
+    mass,
+    inertia,
+    concrete,
+    gx,
+    gy,
+):
+    """The Bodies message at byte ``bodies_at`` of ``buf`` (uint8) and the Contacts message
+    (format 2: the manifold fields from each manifold's first row, slot 0; the rows must be
+    manifolds as `recorder.mcap_writer.manifold_starts` checks) ``contacts_at`` bytes after
+    it (`pack_layout`, then each field's values by memcpy). The int arrays must be int32,
+    ``exists`` bool.
+
+    Returns (k, bodies bytes, contacts bytes, offsets, stats): k = -1, or the index of the
+    first float field holding a NaN or an infinity, or NOT_MANIFOLDS (nothing then is fit to
+    send); offsets and stats as `pack_layout` gives them.
+    """
+    k, p = manifold_counts(slot, push_a, push_b)
+    bad, offsets, bodies_len, contacts_len, sums = pack_layout(
+        buf,
+        bodies_at,
+        step,
+        time,
+        n,
+        m,
+        k,
+        p,
+        contacts_at,
+        position,
+        angle,
+        velocity,
+        angular_velocity,
+        exists,
+        point,
+        normal,
+        depth,
+        pair_depth,
+        push_a,
+        push_b,
+        impulse,
+        tangent_impulse,
+        restitution,
+        mass,
+        inertia,
+        concrete,
+        gx,
+        gy,
+    )
+    if bad >= 0:
+        return bad, bodies_len, contacts_len, offsets, sums
+    if not _manifolds_ok(substep, a, b, feature, slot, normal, pair_depth, push_a, push_b):
+        return NOT_MANIFOLDS, bodies_len, contacts_len, offsets, sums
+    _put_values(buf, offsets[0], position)
+    _put_values(buf, offsets[1], angle)
+    _put_values(buf, offsets[2], velocity)
+    _put_values(buf, offsets[3], angular_velocity)
+    _put_values(buf, offsets[4], exists)
+    if k:
+        # the manifold fields written in place from each manifold's first row (slot 0)
+        starts = _starts(slot, k)
+        points = _int32s(buf, offsets[9], k)
+        for j in range(k - 1):
+            points[j] = starts[j + 1] - starts[j]
+        points[k - 1] = m - starts[k - 1]
+        moved = np.empty(p, dtype=np.int64)
+        if p:
+            pushed = _int32s(buf, offsets[12], p)
+            q = 0
+            for j in range(k):
+                if _moved(push_a, push_b, starts[j]):
+                    pushed[q] = j
+                    moved[q] = starts[j]
+                    q += 1
+        _put_picked(buf, offsets[5], substep, starts)
+        _put_picked(buf, offsets[6], a, starts)
+        _put_picked(buf, offsets[7], b, starts)
+        _put_picked(buf, offsets[8], feature, starts)
+        _put_picked_pairs(buf, offsets[10], normal, starts)
+        _put_picked(buf, offsets[11], pair_depth, starts)
+        _put_picked_pairs(buf, offsets[13], push_a, moved)
+        _put_picked_pairs(buf, offsets[14], push_b, moved)
+    _put_values(buf, offsets[15], point)
+    _put_values(buf, offsets[16], depth)
+    _put_values(buf, offsets[17], impulse)
+    _put_values(buf, offsets[18], tangent_impulse)
+    _put_values(buf, offsets[19], restitution)
+    return -1, bodies_len, contacts_len, offsets, sums
 
 
 @numba.njit(cache=True, nogil=True)
@@ -448,30 +595,29 @@ def pack_frame(
     """A whole MCAP frame at byte ``pos`` (a multiple of 8) of ``buf`` (uint8): the head
     (frames.FRAME_HEAD, native = little-endian: step, time s, n, m, the nine /stats values,
     the two messages' lengths), the Bodies message at ``pos + HEAD_BYTES`` and the Contacts
-    message (format 2: the manifold fields from each manifold's first row, slot 0; the rows
-    must be manifolds as `recorder.mcap_writer.manifold_starts` checks) ``contacts_at`` bytes
-    after it, in one call (`pack_layout`, then each field's values by memcpy). The int arrays
-    must be int32, ``exists`` bool.
+    message ``contacts_at`` bytes after it, in one call (`pack_messages`).
 
     Returns (k, bodies bytes, contacts bytes): k = -1, or the index of the first float field
     holding a NaN or an infinity, or NOT_MANIFOLDS (nothing then is fit to send).
     """
-    k, p = manifold_counts(slot, push_a, push_b)
-    bad, offsets, bodies_len, contacts_len, sums = pack_layout(
+    bad, bodies_len, contacts_len, _, sums = pack_messages(
         buf,
         pos + HEAD_BYTES,
+        contacts_at,
         step,
         time,
         n,
         m,
-        k,
-        p,
-        contacts_at,
         position,
         angle,
         velocity,
         angular_velocity,
         exists,
+        substep,
+        a,
+        b,
+        feature,
+        slot,
         point,
         normal,
         depth,
@@ -489,42 +635,6 @@ def pack_frame(
     )
     if bad >= 0:
         return bad, bodies_len, contacts_len
-    if not _manifolds_ok(substep, a, b, feature, slot, normal, pair_depth, push_a, push_b):
-        return NOT_MANIFOLDS, bodies_len, contacts_len
-    _put_values(buf, offsets[0], position)
-    _put_values(buf, offsets[1], angle)
-    _put_values(buf, offsets[2], velocity)
-    _put_values(buf, offsets[3], angular_velocity)
-    _put_values(buf, offsets[4], exists)
-    if k:
-        starts = _starts(slot, k)
-        points = np.empty(k, dtype=np.int32)
-        for j in range(k - 1):
-            points[j] = starts[j + 1] - starts[j]
-        points[k - 1] = m - starts[k - 1]
-        pushed = np.empty(p, dtype=np.int32)
-        moved = np.empty(p, dtype=np.int64)
-        q = 0
-        for j in range(k):
-            if _moved(push_a, push_b, starts[j]):
-                pushed[q] = j
-                moved[q] = starts[j]
-                q += 1
-        _put_values(buf, offsets[5], _gather(substep, starts))
-        _put_values(buf, offsets[6], _gather(a, starts))
-        _put_values(buf, offsets[7], _gather(b, starts))
-        _put_values(buf, offsets[8], _gather(feature, starts))
-        _put_values(buf, offsets[9], points)
-        _put_values(buf, offsets[10], _gather(normal, starts))
-        _put_values(buf, offsets[11], _gather(pair_depth, starts))
-        _put_values(buf, offsets[12], pushed)
-        _put_values(buf, offsets[13], _gather(push_a, moved))
-        _put_values(buf, offsets[14], _gather(push_b, moved))
-    _put_values(buf, offsets[15], point)
-    _put_values(buf, offsets[16], depth)
-    _put_values(buf, offsets[17], impulse)
-    _put_values(buf, offsets[18], tangent_impulse)
-    _put_values(buf, offsets[19], restitution)
     # the padding after each message is zero, as `recorder.frames.pack` writes it (a ring
     # slot holds an older frame's bytes)
     body_end = pos + HEAD_BYTES + bodies_len

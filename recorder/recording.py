@@ -213,6 +213,7 @@ class Recorder:
             compression=compression,
             foxglove=scene_encoder,
             background=offload == "thread",
+            gravity=self.gravity,
         )
 
     def _rerun_writer(self, path, offload, impulse_scale):
@@ -296,32 +297,27 @@ class Recorder:
 
     def write_batch(self, batch) -> None:
         """Record the steps of an `isaac.engine.records.StepBatch` (`Simulation.batches`), in
-        order after the steps written so far. MCAP writers (a writer process, or in this
-        process without a thread) take the frames of a whole batch from one compiled call
-        (`recorder.pack.pack_frames`); with any other writer the batch's records go one by one.
-        A NaN or infinity raises SimulationError as `write` does, with every step before it
-        recorded."""
+        order after the steps written so far. The MCAP writer (in this process, in a thread or
+        in a writer process) takes a whole batch's Message records from one compiled call
+        (`recorder.mcap_pack`), as does any writer whose ``takes_batches``; a writer that does
+        not takes the batch's records one by one, after the others have checked them. A NaN or
+        infinity raises SimulationError as `write` does, with every step before it recorded."""
         if self.closed:
             raise LogError("the recorder is closed")
         writers = [w for w in (self.mcap, self.rerun) if w is not None]
-        if (
-            not writers
-            or not all(getattr(w, "takes_batches", False) for w in writers)
-            or not _batch_joints_finite(batch)
-        ):
+        batched = [w for w in writers if getattr(w, "takes_batches", False)]
+        if not batched or not _batch_joints_finite(batch):
             # one by one: a step whose joints hold a NaN or infinity stops there, named
             for s in range(batch.steps):
                 self.write(batch.record(s))
             return
-        from recorder.frames import write_batch_to
-
-        sent = [
-            w.write_batch(batch)
-            if hasattr(w, "write_batch")
-            else write_batch_to(w, batch, self.model, self.gravity)
-            for w in writers
-        ]
-        good = min(sent)
+        good = min(w.write_batch(batch) for w in batched)
+        for w in writers:
+            if w in batched:
+                continue
+            for s in range(good):  # checked by the batch writers
+                record = batch.record(s)
+                w.write(record, compute_stats(self.model, self.gravity, record, with_hash=False))
         if good:
             self.steps_written += good
             self.last_step = batch.first + good - 1

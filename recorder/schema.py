@@ -19,6 +19,7 @@ Layout of arrays: a per-body 2-vector field (``position``, ``velocity``) is flat
 
 from __future__ import annotations
 
+import functools
 import struct
 
 import numpy as np
@@ -216,6 +217,7 @@ def file_descriptor_set(joints: bool = False) -> descriptor_pb2.FileDescriptorSe
     return fds
 
 
+@functools.cache
 def schema_bytes(joints: bool = False) -> bytes:
     """The serialized FileDescriptorSet (deterministic bytes) stored as every channel's schema
     (``joints``: the one of a scene with joints)."""

@@ -22,8 +22,10 @@ Transport (both ends in this module):
   quarter of its time.
 - commands, parent -> child, each a 25-byte header ``<cQQQ`` (several in one ``os.write``):
   ``C`` config (pickled dict follows, first message), ``F`` frame (offset, length, end),
-  ``I`` inline frame (length; the frame follows), ``S`` sync (number, settle flag; answered
-  once every earlier frame is taken), ``Z`` close (JSON arguments follow).
+  ``B`` Message records of whole steps (offset, length, end; MCAP, `recorder.mcap_pack`),
+  ``I`` inline frame (length; the frame follows), ``J`` inline records (length; they follow),
+  ``S`` sync (number, settle flag; answered once every earlier frame is taken), ``Z`` close
+  (JSON arguments follow).
 - replies, child -> parent, 9-byte header ``<cQ``: ``K`` ready, ``R`` frame released (end),
   ``S`` synced (its number), ``D`` closed (JSON ``{"path": ...}`` follows), ``E`` failed
   (UTF-8 message follows).
@@ -291,6 +293,23 @@ class WriterProcess:
             from recorder.pack import pack_rerun, rerun_offsets
 
             self._pack_rerun, self._rerun_offsets = pack_rerun, rerun_offsets
+        # MCAP without the Foxglove channel (drawn from records in the child): every step goes
+        # as Message records packed here (recorder.mcap_pack), which the child enters into its
+        # chunks a stretch at a time; /world is encoded here too, when existence changes
+        self._packer = None
+        self._last_exists = None  # existence at the last step sent (None: none yet)
+        if kind == "mcap" and not config.get("foxglove") and self._compiled:
+            from recorder.mcap_pack import BatchPacker
+            from recorder.mcap_writer import record_channels
+
+            joints = config.get("joints", ())
+            self._packer = BatchPacker(
+                _Namespace(**model),
+                self._gravity,
+                float(config["scene"]["dt"]),
+                record_channels(bool(joints)),
+                joints,
+            )
         os.set_blocking(self._rep, False)
         payload = pickle.dumps(
             {"kind": kind, "path": self.path, **config}, protocol=pickle.HIGHEST_PROTOCOL
@@ -310,6 +329,11 @@ class WriterProcess:
         """
         if self.kind == "rerun":
             return self._write_rerun(record, stats)
+        if self._packer is not None:
+            from recorder.mcap_pack import one_step_batch
+
+            # stats: the packer computes the same values (recorder.pack._stat_sums)
+            return self.write_batch(one_step_batch(record, self._packer.clock_dt)) == 1
         if record.joints is not None and not joints_finite(record.joints):
             return False
         bodies_size, contacts_size, size = frame_sizes(record)
@@ -330,6 +354,8 @@ class WriterProcess:
         packed by one compiled call per stretch of the ring (`recorder.pack.pack_frames`) rather
         than one call per step. Returns how many steps were sent: all of them, or the steps
         before the first one holding a NaN or an infinity (the caller says which)."""
+        if self._packer is not None:
+            return self._write_records(batch)
         if self.kind == "rerun" or not self._compiled:
             for s in range(batch.steps):
                 if not self.write(batch.record(s)):
@@ -368,6 +394,41 @@ class WriterProcess:
             lo = hi
         return batch.steps
 
+    def _write_records(self, batch) -> int:
+        """`write_batch` for MCAP: the batch's Message records (`recorder.mcap_pack`) packed
+        straight into the ring by one compiled call per stretch of at most a quarter of it,
+        each stretch announced to the child as one ``B`` command; a step too large for that
+        goes through the command pipe (``J``)."""
+        packer = self._packer
+        plan = packer.plan(batch, self._last_exists)
+        sizes = plan.sizes
+        ends = np.cumsum(sizes)
+        quarter = self.capacity // 4
+        lo = 0
+        done = batch.steps
+        while lo < batch.steps:
+            base = int(ends[lo - 1]) if lo else 0
+            if sizes[lo] > quarter:  # one step, through the pipe
+                hi = lo + 1
+                buf = np.empty(int(sizes[lo]), dtype=np.uint8)
+                done, end, _ = packer.pack(buf, 0, lo, hi, batch, plan)
+                if done > lo:
+                    self._notify()
+                    self._send(b"J", end, payload=buf[:end].tobytes())
+            else:
+                hi = lo + int(np.searchsorted(ends[lo:] - base, quarter, "right"))
+                total = int(ends[hi - 1]) - base
+                pos, stop = self._reserve(total)
+                done, end, _ = packer.pack(self._ring_u8, pos, lo, hi, batch, plan)
+                if end > pos:
+                    self._announce(pos, end - pos, stop - total + (end - pos), kind=b"B")
+            if done < hi:
+                break
+            lo = hi
+        if done:
+            self._last_exists = np.array(batch.exists[done - 1], dtype=bool)
+        return done
+
     def _reserve(self, size: int) -> tuple[int, int]:
         """Where the next frame of ``size`` bytes goes: its offset in the ring and its end in
         bytes handed out; waits while the child still holds that part of the ring."""
@@ -382,9 +443,9 @@ class WriterProcess:
                 self._pump(block=True)
         return pos, head + size
 
-    def _announce(self, pos: int, size: int, end: int) -> None:
+    def _announce(self, pos: int, size: int, end: int, kind: bytes = b"F") -> None:
         self.head = end
-        self._pending += _COMMAND.pack(b"F", pos, size, end)
+        self._pending += _COMMAND.pack(kind, pos, size, end)
         if len(self._pending) >= NOTIFY_EVERY * _COMMAND.size:
             self._notify()
 
@@ -699,6 +760,7 @@ def _make_bare_writer(config: dict):
             foxglove=scene_encoder,
             metadata=config["metadata"],
             joints=config.get("joints", ()),
+            gravity=config.get("gravity"),
         )
     from recorder.rerun_writer import RerunLogWriter
 
@@ -795,6 +857,15 @@ def child_main(argv: list[str]) -> int:
                 # into its batch); the slot goes back to the parent once the step is taken
                 writer.write(ring_u8 if writer.raw else ring, a, b)
                 reply(b"R", c)
+            elif kind == b"B":  # Message records of whole steps (recorder.mcap_pack)
+                writer.write_records(ring_u8, a, a + b)
+                reply(b"R", c)
+            elif kind == b"J":
+                data = commands.read(a)
+                if data is None:  # the parent died while sending these records
+                    writer.abandon(reason=ABANDONED)
+                    return 0
+                writer.write_records(np.frombuffer(data, dtype=np.uint8), 0, a)
             elif kind == b"I":
                 data = commands.read(a)
                 if data is None:  # the parent died while sending this frame

@@ -28,7 +28,7 @@ def _record(path, offload, by_batch, steps=90, size=7):
     return path.read_bytes()
 
 
-@pytest.mark.parametrize("offload", ["process", "none"])
+@pytest.mark.parametrize("offload", ["process", "thread", "none"])
 def test_a_batch_gives_the_bytes_of_its_records_written_one_by_one(tmp_path, offload):
     one_by_one = _record(tmp_path / "records.mcap", offload, by_batch=False)
     batched = _record(tmp_path / "batches.mcap", offload, by_batch=True)
@@ -56,7 +56,7 @@ def _poisoned(batch: StepBatch, s: int) -> StepBatch:
     return StepBatch(batch.first, batch.dt, tuple(a.copy() for a in (*arrays, *rest)), batch.steps)
 
 
-@pytest.mark.parametrize("offload", ["process", "none"])
+@pytest.mark.parametrize("offload", ["process", "thread", "none"])
 def test_a_nan_in_a_batch_stops_the_log_at_the_step_before_it(tmp_path, offload):
     sim = Simulation(load_scene(SCENE))
     path = tmp_path / "nan.mcap"
