@@ -157,3 +157,8 @@ def test_whole_batches_write_what_the_records_one_by_one_write(tmp_path, name, s
     # the content is there: every step's outlines and stats
     assert len(a[("/world/bodies/moving", "LineStrips2D:strips")]) == steps + 1
     assert len(a[("/stats/total_energy", "Scalars:scalars")]) == steps + 1
+    # sim_time: the record's time, step * dt, in nanoseconds rounded as rr.set_time rounds it
+    dt = scene.world.dt
+    for entity in ("/world/bodies/moving", "/world/contacts", "/stats/max_depth"):
+        times = a[(entity, "sim_time")]
+        assert times == {k: round(1e9 * (k * dt)) for k in times} and len(times) > steps
