@@ -11,7 +11,6 @@ memory comes from; on a C library without mallopt it does nothing.
 from __future__ import annotations
 
 import ctypes
-import ctypes.util
 
 M_TRIM_THRESHOLD = -1  # glibc malloc.h
 M_MMAP_THRESHOLD = -3
@@ -27,10 +26,17 @@ def reuse_large_buffers() -> bool:
     if _done:
         return True
     try:
-        libc = ctypes.CDLL(ctypes.util.find_library("c") or None)
-        mallopt = libc.mallopt
+        # the C library this interpreter runs on (its own symbols); ctypes.util is imported
+        # only when that has no mallopt (it imports subprocess, tempfile, shutil: 10-30 ms of
+        # every command's start-up)
+        mallopt = ctypes.CDLL(None).mallopt
     except (OSError, AttributeError):
-        return False
+        try:
+            from ctypes.util import find_library
+
+            mallopt = ctypes.CDLL(find_library("c") or None).mallopt
+        except (OSError, AttributeError):
+            return False
     mallopt.argtypes = (ctypes.c_int, ctypes.c_int)
     ok = bool(mallopt(M_MMAP_THRESHOLD, MMAP_THRESHOLD)) and bool(
         mallopt(M_TRIM_THRESHOLD, TRIM_THRESHOLD)

@@ -46,7 +46,13 @@ CONTACT = Kind(3, "contacts", "contact point", "red dot", (220, 30, 30))
 NORMAL = Kind(4, "normals", "normal (a to b)", "orange arrow", (245, 150, 0))
 IMPULSE = Kind(5, "impulses", "impulse j n", "purple arrow", (150, 40, 200))
 PUSH = Kind(6, "push", "push-out", "green arrow", (0, 160, 60))
-LEGEND = (MOVING, CONCRETE, CONTACT, NORMAL, IMPULSE, PUSH)
+# a joint: a line between its bodies' anchors (a distance joint's rod, a prismatic joint's slide
+# along its axis; none to see for a revolute or weld joint, whose anchors coincide) and the
+# anchors as dots (a revolute joint's pivot); both darker than the bodies' blue, so they read on
+# top of an outline
+JOINT = Kind(7, "joints/lines", "joint (anchor a to anchor b)", "thick teal line", (0, 140, 150))
+ANCHOR = Kind(8, "joints/anchors", "joint anchor, pivot", "dark teal dot", (0, 70, 80))
+LEGEND = (MOVING, CONCRETE, CONTACT, NORMAL, IMPULSE, PUSH, JOINT, ANCHOR)
 
 BACKGROUND = (250, 250, 247)  # the 2D view's, near white
 

@@ -219,6 +219,7 @@ class Recorder:
     def _rerun_writer(self, path, offload, impulse_scale):
         if offload == "process":
             from recorder.frames import model_table
+            from recorder.mcap_writer import joint_table_rows
             from recorder.writer_process import WriterProcess
 
             return WriterProcess(
@@ -231,6 +232,7 @@ class Recorder:
                     "gravity": self.gravity,
                     "scene": {"name": str(self.scene.name), "dt": float(self.scene.world.dt)},
                     "impulse_scale": impulse_scale,
+                    "joints": joint_table_rows(getattr(self.scene, "joints", ())),
                 },
             )
         from recorder.rerun_writer import RerunLogWriter

@@ -11,9 +11,14 @@ Layout (docs/log-format.md, "Rerun"):
   length, m);
   ``world/impulses``: ``j * n`` at the point, ``impulse_scale`` m per N s (the scale is stored
   in the recording as AnyValues on ``world/impulses`` and in the ``info`` text document);
+- ``world/joints/lines``: one 2-point strip per joint whose bodies exist, from its world anchor
+  on body a to its anchor on body b (m); ``world/joints/anchors``: those anchors as points (a
+  revolute joint's two coincide: its pivot);
 - ``stats/<name>``: the `/stats` scalars as time series.
-Each step's outlines and arrows are computed as it arrives (`recorder.rerun_batch`, into the
-batch's float32 buffers); the batch is sent column-wise (``send_columns``) every ``batch`` steps,
+Outlines, arrows and joints are computed by compiled kernels (`recorder.rerun_batch`) into the
+open batch's float32 buffers: a whole `StepBatch` in one call (`write_batch`, with its stats and
+its never-write-NaN check in another), or one step as it arrives (`write`, `append`: the Rerun
+writer process's frames); the batch is sent column-wise (``send_columns``) every ``batch`` steps,
 from a thread of its own in the Rerun writer process.
 Positions are float32 in Rerun: exact values live in the MCAP log only.
 """
@@ -28,10 +33,10 @@ import numpy as np
 import pyarrow as pa
 import rerun as rr
 
-from isaac.engine.records import StepRecord
+from isaac.engine.records import CONTACT_FIELDS, StepRecord
 from isaac.errors import LogError
 from recorder import blueprint
-from recorder.shapes import drawn_shapes
+from recorder.shapes import drawn_shapes, joint_geometry
 
 APP_ID = "isaac"
 STAT_NAMES = (
@@ -103,6 +108,17 @@ def _column(descriptor, batch_type, values: pa.Array, counts: np.ndarray) -> rr.
     return rr.ComponentColumn(descriptor, batch_type(values), offsets=offsets)
 
 
+def _time_columns(steps: list[int], sim_times: list[float]) -> list[rr.TimeColumn]:
+    """The ``step`` and ``sim_time`` (s) time columns of a batch's steps, converted in one go:
+    ``sim_time`` as integer nanoseconds rounded as `rr.set_time` rounds a float of seconds
+    (Rerun's own conversion of a float array truncates; of a list, a Python call a step)."""
+    nanos = np.rint(np.asarray(sim_times, dtype=np.float64) * 1e9).astype(np.int64)
+    return [
+        rr.TimeColumn("step", sequence=np.asarray(steps, dtype=np.int64)),
+        rr.TimeColumn("sim_time", duration=nanos.astype("timedelta64[ns]")),
+    ]
+
+
 def _vec2(points: np.ndarray) -> pa.Array:
     """(k, 2) float32 as Rerun's Vec2D arrow array (fixed-size lists of 2), without a copy."""
     return pa.FixedSizeListArray.from_arrays(pa.array(points.reshape(-1)), type=_VEC2_TYPE)
@@ -113,36 +129,27 @@ assert _VEC2_TYPE == rr.components.Vector2DBatch._ARROW_DATATYPE
 
 
 def _load_kernels() -> None:
-    """Import and load the compiled step kernels now (about 1 s the first time in a process),
-    so that the first steps of a run do not wait for them."""
-    from recorder.rerun_batch import step_arrays, step_outlines
+    """Import and load the compiled kernels now (about 1 s the first time in a process), so
+    that the first steps of a run do not wait for them."""
+    from recorder.rerun_batch import Buffers, Drawing, draw_steps, step_outlines
 
     z1, z2, f2 = np.zeros(1), np.zeros((1, 2)), np.zeros((4, 2), dtype=np.float32)
     one = np.ones(1, dtype=np.int64)
     step_outlines(z1, z2, np.zeros(1, dtype=np.int64), np.zeros((1, 2, 2)), one, f2, 0)
-    step_arrays(
-        z1,
-        z2,
-        np.zeros(1, dtype=np.int64),
-        np.zeros((1, 2, 2)),
-        one,
-        f2,
-        0,
-        z2,
-        z2,
-        z1,
-        z2,
-        z2,
-        1.0,
-        1.0,
-        f2,
-        f2,
-        f2,
-        0,
-        f2,
-        f2,
-        0,
-    )
+    i0 = np.zeros(0, dtype=np.int64)
+    d = Drawing(np.zeros((1, 2, 2)), one, np.ones(1, bool), i0, i0, z2[:0], z2[:0], np.ones(3))
+    out = Buffers(
+        f2, np.zeros(2, np.int32), f2, f2, f2, f2, f2, f2, np.zeros((1, 4), np.int64),
+        np.zeros(6, np.int64),
+    )  # fmt: skip
+    row = np.zeros((0, 2))
+    args = [z1[None], z2[None], np.ones((1, 1), bool), np.zeros(2, np.int64), row, row, z1[:0]]
+    args += [row, row]
+    draw_steps(*args, d, out)  # a writer process's frames: writable arrays
+    for a in args:  # a StepBatch's: read-only (numba compiles each kind apart)
+        a.flags.writeable = False
+    out.at[:] = 0
+    draw_steps(*args, d, out)
 
 
 class _RunSummary:
@@ -190,6 +197,9 @@ class RerunLogWriter:
     batch: steps buffered per ``send_columns``.
     background: send each finished batch from a thread of its own (the Rerun writer process
         does, so that the steps behind a batch are taken at once); otherwise in the caller.
+    joints: the joint table (rows with a, b, local_a, local_b; `recorder.shapes.joint_geometry`),
+        default ``model.joints``: each joint is drawn as a line between its bodies' anchors,
+        the anchors marked (a revolute joint's coincide: its pivot).
     """
 
     def __init__(
@@ -203,7 +213,10 @@ class RerunLogWriter:
         push_scale: float = PUSH_SCALE,
         batch: int = 100,
         background: bool = False,
+        joints=None,
     ) -> None:
+        from recorder.rerun_batch import Drawing
+
         self.path = str(path)
         self.partial_path = self.path + ".partial"
         self.model = model
@@ -220,12 +233,26 @@ class RerunLogWriter:
         self.push_scale = float(push_scale)
         self.scene_name = str(scene.name)
         self.dt = float(scene.world.dt)
+        gravity = getattr(scene.world, "gravity", None)
+        # (gx, gy) m/s^2 for the stats of whole batches; None: only steps given with their stats
+        self.gravity = None if gravity is None else tuple(float(g) for g in gravity)
+        joint_a, joint_b, local_a, local_b = joint_geometry(model, joints)
+        self.joint_count = len(joint_a)
+        self._moving_points = int(np.sum(self.vertex_count[self._not_concrete] + 1))
+        self._drawing = Drawing(
+            self.vertices_local, self.vertex_count, np.ascontiguousarray(self._not_concrete),
+            joint_a, joint_b, local_a, local_b,
+            np.array([self.normal_length, self.impulse_scale, self.push_scale]),
+        )  # fmt: skip
+        self._stats_model = tuple(
+            np.ascontiguousarray(getattr(model, k), dtype=t)
+            for k, t in (("mass", np.float64), ("inertia", np.float64), ("concrete", bool))
+        )
         self._summary = _RunSummary()
         self._closed = False
         self._sent_last: int | None = None  # the last step of the batches sent
         self._static_done = False
         self._last_labels_key: bytes | None = None
-        self._moving_key: bytes | None = None
         self._reset()
         _load_kernels()
         self._error: BaseException | None = None
@@ -251,10 +278,15 @@ class RerunLogWriter:
             ),
             static=True,
         )
+        # the overlays' class labels stay off: drawn beside every point or arrow of a step
+        # with few of them, they covered small bodies (the car's wheels); hovering names them
         rec.log(
             "world/contacts",
             rr.Points2D.from_fields(
-                class_ids=[blueprint.CONTACT.class_id], radii=[-2.5], draw_order=40.0
+                class_ids=[blueprint.CONTACT.class_id],
+                radii=[-2.5],
+                draw_order=40.0,
+                show_labels=False,
             ),
             static=True,
         )
@@ -265,6 +297,29 @@ class RerunLogWriter:
                     class_ids=[kind.class_id],
                     radii=[-1.5 if kind is blueprint.PUSH else -1.0],
                     draw_order=30.0 if kind is blueprint.PUSH else 20.0,
+                    show_labels=False,
+                ),
+                static=True,
+            )
+        if self.joint_count:
+            # above the bodies' outlines, below the contact arrows and points
+            rec.log(
+                f"world/{blueprint.JOINT.entity}",
+                rr.LineStrips2D.from_fields(
+                    class_ids=[blueprint.JOINT.class_id],
+                    radii=[-2.0],
+                    draw_order=25.0,
+                    show_labels=False,
+                ),
+                static=True,
+            )
+            rec.log(
+                f"world/{blueprint.ANCHOR.entity}",
+                rr.Points2D.from_fields(
+                    class_ids=[blueprint.ANCHOR.class_id],
+                    radii=[-4.0],
+                    draw_order=35.0,
+                    show_labels=False,
                 ),
                 static=True,
             )
@@ -343,64 +398,65 @@ class RerunLogWriter:
         self._count = 0  # steps in the batch
         self._steps: list[int] = []
         self._times: list[float] = []
-        self._moving: list[np.ndarray] = []  # moving bodies' indices per step (shared)
         self._stats_rows: list[int] = []  # the batch's steps that came with stats
         self._buffers_sent = True  # Rerun may still read the last batch's arrays: new ones
 
     def _new_buffers(self) -> None:
-        """Fresh float32 arrays for a batch, sized like the last one's (they grow as needed);
-        fresh because Rerun takes the arrays it is sent without copying and encodes them
-        later, in its own threads."""
+        """Fresh arrays for a batch, sized like the last one's (they grow as needed); fresh
+        because Rerun takes the arrays it is sent without copying and encodes them later, in
+        its own threads."""
+        from recorder.rerun_batch import Buffers
+
         b = self.batch
-        if not hasattr(self, "_stats"):
-            self._stats = np.empty((b, len(STAT_NAMES)))
-            self._counts = np.zeros(b, dtype=np.int64)  # contact rows per step
-            self._push_counts = np.zeros(b, dtype=np.int64)  # push arrows per step
-            self._strip_cap = b * self._strip_points
+        if not hasattr(self, "_caps"):
+            moving = int(np.sum(self._not_concrete))
             # a pile has 1-3 contact rows per body: rarely grown (untouched pages cost nothing)
-            self._row_cap = 4 * b * len(self.names)
-        self._strips = np.empty((self._strip_cap, 2), dtype=np.float32)  # outline points, m
-        self._points = np.empty((self._row_cap, 2), dtype=np.float32)  # m
-        self._normals = np.empty((self._row_cap, 2), dtype=np.float32)  # m of arrow
-        self._impulses = np.empty((self._row_cap, 2), dtype=np.float32)  # m of arrow
-        self._push_pt = np.empty((2 * self._row_cap, 2), dtype=np.float32)  # m
-        self._push_v = np.empty((2 * self._row_cap, 2), dtype=np.float32)  # m
-        self._strip_at = self._row_at = self._push_at = 0
+            # (outline points, strips, contact rows, joint anchors)
+            self._caps = [b * self._moving_points, b * moving, 4 * b * len(self.names)]
+            self._caps.append(2 * b * self.joint_count)
+        points, strips, rows, joints = self._caps
+        f32 = lambda k: np.empty((k, 2), dtype=np.float32)  # noqa: E731
+        self._out = Buffers(
+            f32(points), np.empty(strips, dtype=np.int32), f32(rows), f32(rows), f32(rows),
+            f32(2 * rows), f32(2 * rows), f32(joints), np.zeros((b, 4), dtype=np.int64),
+            np.zeros(6, dtype=np.int64),
+        )  # fmt: skip
+        self._stats = np.empty((b, len(STAT_NAMES)))
         self._buffers_sent = False
 
-    def _grow(self, strips: int, rows: int) -> None:
-        """Room for ``strips`` outline points and ``rows`` contact rows (twice as many push
-        arrows) in the batch, keeping what is buffered."""
+    def _make_room(self, steps: int, rows: int) -> None:
+        """Room in the batch's buffers for ``steps`` more steps holding ``rows`` contact rows,
+        keeping what is buffered."""
+        from recorder.rerun_batch import AT_JOINTS, AT_POINTS, AT_ROWS, AT_STRIPS, Buffers
 
-        def grown(old, used, cap):
-            new = np.empty((cap, 2), dtype=np.float32)
-            new[:used] = old[:used]
+        if self._buffers_sent:
+            self._new_buffers()
+        out = self._out
+        at = out.at
+        need = [
+            at[AT_POINTS] + steps * self._moving_points,
+            at[AT_STRIPS] + steps * int(np.sum(self._not_concrete)),
+            at[AT_ROWS] + rows,
+            at[AT_JOINTS] + 2 * steps * self.joint_count,
+        ]
+        if all(n <= c for n, c in zip(need, self._caps)):
+            return
+        self._caps = [max(c, n, 2 * c if n > c else c) for n, c in zip(need, self._caps)]
+        points, strips, rows_cap, joints = self._caps
+
+        def grown(old, cap):
+            if old.shape[0] >= cap:
+                return old
+            new = np.empty((cap, *old.shape[1:]), dtype=old.dtype)
+            new[: old.shape[0]] = old
             return new
 
-        if strips > self._strip_cap:
-            self._strip_cap = max(strips, 2 * self._strip_cap)
-            self._strips = grown(self._strips, self._strip_at, self._strip_cap)
-        if rows > self._row_cap:
-            self._row_cap = cap = max(rows, 2 * self._row_cap)
-            for name in ("_points", "_normals", "_impulses"):
-                setattr(self, name, grown(getattr(self, name), self._row_at, cap))
-            for name in ("_push_pt", "_push_v"):
-                setattr(self, name, grown(getattr(self, name), self._push_at, 2 * cap))
-
-    def _strip_lengths(self) -> tuple[np.ndarray, list[int]]:
-        """Points per outline strip over the batch, and strips per step."""
-        moving, count = self._moving, self._count
-        lengths, counts = [], []
-        i = 0
-        while i < count:
-            idx = moving[i]
-            j = i + 1
-            while j < count and moving[j] is idx:
-                j += 1
-            counts.extend([idx.size] * (j - i))
-            lengths.append(np.tile(self.vertex_count[idx] + 1, j - i))
-            i = j
-        return np.concatenate(lengths), counts
+        self._out = Buffers(
+            grown(out.strips, points), grown(out.strip_len, strips), grown(out.points, rows_cap),
+            grown(out.normals, rows_cap), grown(out.impulses, rows_cap),
+            grown(out.push_pt, 2 * rows_cap), grown(out.push_v, 2 * rows_cap),
+            grown(out.joints, joints), out.per_step, out.at,
+        )  # fmt: skip
 
     def _outlines(
         self, angle: np.ndarray, position: np.ndarray, mask: np.ndarray
@@ -446,6 +502,37 @@ class RerunLogWriter:
             values,
         )
 
+    def _log_static(self, angle: np.ndarray, position: np.ndarray, exists: np.ndarray) -> None:
+        """The concrete bodies' outlines, once, at their first step's poses."""
+        concrete = self.concrete & exists
+        if np.any(concrete):
+            self.rec.log(
+                "world/bodies/concrete",
+                rr.LineStrips2D(
+                    self._outlines(angle, position, concrete),
+                    radii=[-3.0],
+                    labels=[self._label(k) for k in np.flatnonzero(concrete)],
+                    class_ids=[blueprint.CONCRETE.class_id],
+                    draw_order=5.0,
+                ),
+                static=True,
+            )
+        self._static_done = True
+
+    def _log_labels(self, step: int, time: float, moving: np.ndarray) -> None:
+        """The moving bodies' labels from ``step`` on: logged when a body enters or leaves, not
+        every step. moving: (n,) bool, the moving bodies that exist."""
+        key = moving.tobytes()
+        if key == self._last_labels_key:
+            return
+        self.rec.set_time("step", sequence=int(step))
+        self.rec.set_time("sim_time", duration=float(time))
+        self.rec.log(
+            "world/bodies/moving",
+            rr.LineStrips2D.from_fields(labels=[self._label(k) for k in np.flatnonzero(moving)]),
+        )
+        self._last_labels_key = key
+
     def append(
         self,
         step: int,
@@ -460,89 +547,31 @@ class RerunLogWriter:
         push_b: np.ndarray,
         stats: np.ndarray | None,
     ) -> None:
-        """Buffer one step: what it draws is computed now (`recorder.rerun_batch.step_arrays`)
-        into the batch's float32 buffers, so the arrays given may be reused once this returns.
+        """Buffer one step: what it draws is computed now (`recorder.rerun_batch.draw_steps`,
+        a batch of one) into the batch's float32 buffers, so the arrays given may be reused
+        once this returns.
 
         position (n, 2) m and angle (n,) rad, world; exists (n,) bool; per contact row: point
         (m, 2) m, unit normal (m, 2) from a to b, impulse (m,) N s, push_a, push_b (m, 2) m;
         stats: the nine `/stats` values in STAT_NAMES order, or None. `write` and the Rerun
         writer process (`recorder.frames.RerunFrame`) both come here.
         """
-        from recorder.rerun_batch import step_arrays
+        from recorder.rerun_batch import draw_steps
 
-        rec = self.rec
         exists = np.asarray(exists, dtype=bool)
         if not self._static_done:
-            concrete = self.concrete & exists
-            if np.any(concrete):
-                rec.log(
-                    "world/bodies/concrete",
-                    rr.LineStrips2D(
-                        self._outlines(angle, position, concrete),
-                        radii=[-3.0],
-                        labels=[self._label(k) for k in np.flatnonzero(concrete)],
-                        class_ids=[blueprint.CONCRETE.class_id],
-                        draw_order=5.0,
-                    ),
-                    static=True,
-                )
-            self._static_done = True
-        moving = exists & self._not_concrete
-        key = moving.tobytes()
-        if key != self._last_labels_key:
-            # labels change only when a body enters or leaves: logged then, not every step
-            rec.set_time("step", sequence=int(step))
-            rec.set_time("sim_time", duration=float(time))
-            rec.log(
-                "world/bodies/moving",
-                rr.LineStrips2D.from_fields(
-                    labels=[self._label(k) for k in np.flatnonzero(moving)]
-                ),
-            )
-            self._last_labels_key = key
-        if key != self._moving_key:
-            self._moving_key = key
-            self._moving_index = np.flatnonzero(moving)
-            self._strip_points = int(np.sum(self.vertex_count[self._moving_index] + 1))
-        if self._buffers_sent:
-            self._new_buffers()
+            self._log_static(angle, position, exists)
+        self._log_labels(step, time, exists & self._not_concrete)
+        m = int(impulse.shape[0])
+        self._make_room(1, m)
         k = self._count
         self._steps.append(int(step))
         self._times.append(float(time))
-        self._moving.append(self._moving_index)
-        m = int(impulse.shape[0])
-        if (
-            self._strip_at + self._strip_points > self._strip_cap
-            or self._row_at + m > self._row_cap
-        ):
-            self._grow(self._strip_at + self._strip_points, self._row_at + m)
-        push_at = self._push_at
-        self._strip_at, self._push_at = step_arrays(
-            angle,
-            position,
-            self._moving_index,
-            self.vertices_local,
-            self.vertex_count,
-            self._strips,
-            self._strip_at,
-            point,
-            normal,
-            impulse,
-            push_a,
-            push_b,
-            self.normal_length,
-            self.impulse_scale,
-            self._points,
-            self._normals,
-            self._impulses,
-            self._row_at,
-            self._push_pt,
-            self._push_v,
-            push_at,
-        )
-        self._row_at += m
-        self._counts[k] = m
-        self._push_counts[k] = self._push_at - push_at
+        c = np.ascontiguousarray
+        draw_steps(
+            c(angle)[None], c(position)[None], c(exists)[None], np.array([0, m], dtype=np.int64),
+            c(point), c(normal), c(impulse), c(push_a), c(push_b), self._drawing, self._out,
+        )  # fmt: skip
         if stats is not None:
             self._stats[k] = stats
             self._stats_rows.append(k)
@@ -550,30 +579,98 @@ class RerunLogWriter:
         if self._count >= self.batch:
             self._send()
 
+    @property
+    def takes_batches(self) -> bool:
+        """Whether `write_batch` may be given whole batches: it computes their stats, which
+        needs the scene's gravity."""
+        return self.gravity is not None
+
+    def write_batch(self, batch) -> int:
+        """Buffer the steps of an `isaac.engine.records.StepBatch`: their stats and what they
+        draw computed over the whole batch by two compiled calls (`recorder.rerun_batch`:
+        `batch_stats` checks every float on the way, `draw_steps`), and sent every ``batch``
+        steps as columns. Returns how many steps were taken: all, or those before the first one
+        holding a NaN or an infinity (the caller says which; nothing of it is drawn)."""
+        from recorder.rerun_batch import batch_stats, draw_steps
+
+        rows = dict(zip(CONTACT_FIELDS, batch.row_arrays))
+        stats = np.empty((batch.steps, len(STAT_NAMES)))
+        good = batch_stats(
+            *self._stats_model, *self.gravity, batch.position, batch.angle, batch.velocity,
+            batch.angular_velocity, batch.exists, batch.offsets, rows["point"], rows["normal"],
+            rows["depth"], rows["pair_depth"], rows["push_a"], rows["push_b"], rows["impulse"],
+            rows["tangent_impulse"], rows["restitution"], stats,
+        )  # fmt: skip
+        if good and not self._static_done:
+            self._log_static(batch.angle[0], batch.position[0], batch.exists[0])
+        steps = batch.first + np.arange(good)
+        times = steps * batch.dt  # a record's time: step * dt
+        moving = batch.exists[:good] & self._not_concrete
+        if good:
+            # labels where the moving bodies change (and at the first step, if not logged)
+            changed = np.flatnonzero(np.any(moving[1:] != moving[:-1], axis=1)) + 1
+            for s in (0, *changed.tolist()):
+                self._log_labels(int(steps[s]), float(times[s]), moving[s])
+        lo = 0
+        offsets = batch.offsets
+        while lo < good:
+            hi = min(good, lo + self.batch - self._count)
+            self._make_room(hi - lo, int(offsets[hi] - offsets[lo]))
+            k = self._count
+            draw_steps(
+                batch.angle[lo:hi], batch.position[lo:hi], batch.exists[lo:hi],
+                offsets[lo : hi + 1], rows["point"], rows["normal"], rows["impulse"],
+                rows["push_a"], rows["push_b"], self._drawing, self._out,
+            )  # fmt: skip
+            self._steps.extend(steps[lo:hi].tolist())
+            self._times.extend(times[lo:hi].tolist())
+            self._stats[k : k + hi - lo] = stats[lo:hi]
+            self._stats_rows.extend(range(k, k + hi - lo))
+            self._count = k + hi - lo
+            if self._count >= self.batch:
+                self._send()
+            lo = hi
+        return good
+
     def _send(self) -> None:
         """Close the open batch and send it (with ``background``: hand it to the thread)."""
+        from recorder.rerun_batch import (
+            AT_JOINTS,
+            AT_POINTS,
+            AT_PUSHES,
+            AT_ROWS,
+            AT_STRIPS,
+            JOINTS,
+            PUSHES,
+            ROWS,
+            STRIPS,
+        )
+
         if not self._count:
             return
         self._check()
         count = self._count
-        lengths, strip_counts = self._strip_lengths()
-        self._push_v[: self._push_at] *= np.float32(self.push_scale)  # drawn scaled
+        out = self._out
+        at = out.at
+        per_step = out.per_step[:count]
         stats = self._stats[self._stats_rows]
         self._summary.add(self._steps, stats, self._stats_rows)
         # what _send_batch uses: the batch's own arrays (new ones are made for the next)
         job = (
             self._steps,
             self._times,
-            self._strips[: self._strip_at],
-            lengths,
-            strip_counts,
-            self._points[: self._row_at],
-            self._normals[: self._row_at],
-            self._impulses[: self._row_at],
-            self._counts[:count].copy(),
-            self._push_pt[: self._push_at],
-            self._push_v[: self._push_at],
-            self._push_counts[:count].copy(),
+            out.strips[: at[AT_POINTS]],
+            out.strip_len[: at[AT_STRIPS]],
+            per_step[:, STRIPS].copy(),
+            out.points[: at[AT_ROWS]],
+            out.normals[: at[AT_ROWS]],
+            out.impulses[: at[AT_ROWS]],
+            per_step[:, ROWS].copy(),
+            out.push_pt[: at[AT_PUSHES]],
+            out.push_v[: at[AT_PUSHES]],
+            per_step[:, PUSHES].copy(),
+            out.joints[: at[AT_JOINTS]],
+            per_step[:, JOINTS].copy(),
             stats,
             self._stats_rows,
         )
@@ -598,16 +695,15 @@ class RerunLogWriter:
         push_pt,
         push_v,
         push_counts,
+        joints,
+        joint_counts,
         stats,
         stats_rows,
     ) -> None:
-        """Send one batch (the arrays `_send` took): outlines, contacts, arrows, stats."""
+        """Send one batch (the arrays `_send` took): outlines, contacts, arrows, joints, stats."""
         rec = self.rec
         count = len(steps)
-        times = [
-            rr.TimeColumn("step", sequence=steps),
-            rr.TimeColumn("sim_time", duration=sim_times),
-        ]
+        times = _time_columns(steps, sim_times)
         rec.send_columns(
             "world/bodies/moving",
             indexes=times,
@@ -671,13 +767,38 @@ class RerunLogWriter:
                 ),
             ],
         )
+        if self.joint_count:
+            # each joint a 2-point strip from a's anchor to b's; the anchors as points
+            rec.send_columns(
+                f"world/{blueprint.JOINT.entity}",
+                indexes=times,
+                columns=[
+                    _column(
+                        rr.LineStrips2D.descriptor_strips(),
+                        rr.components.LineStrip2DBatch,
+                        _strips_arrow(joints, np.full(len(joints) // 2, 2, dtype=np.int32)),
+                        joint_counts,
+                    )
+                ],
+            )
+            rec.send_columns(
+                f"world/{blueprint.ANCHOR.entity}",
+                indexes=times,
+                columns=[
+                    _column(
+                        rr.Points2D.descriptor_positions(),
+                        rr.components.Position2DBatch,
+                        _vec2(joints),
+                        2 * joint_counts,
+                    )
+                ],
+            )
         if stats_rows:
             stat_times = times
             if len(stats_rows) < count:  # some steps came without stats
-                stat_times = [
-                    rr.TimeColumn("step", sequence=[steps[k] for k in stats_rows]),
-                    rr.TimeColumn("sim_time", duration=[sim_times[k] for k in stats_rows]),
-                ]
+                stat_times = _time_columns(
+                    [steps[k] for k in stats_rows], [sim_times[k] for k in stats_rows]
+                )
             ones = np.ones(len(stats_rows), dtype=np.int64)
             for j, name in enumerate(STAT_NAMES):
                 rec.send_columns(

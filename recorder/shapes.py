@@ -48,3 +48,21 @@ def drawn_shapes(model) -> tuple[np.ndarray, np.ndarray]:
         drawn[k, CIRCLE_SIDES + 1 :] = drawn[k, CIRCLE_SIDES]
         counts[k] = CIRCLE_SIDES + 1
     return drawn, counts
+
+
+def joint_geometry(model, joints=None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(a (m,) int64, b (m,) int64, local_a (m, 2) m, local_b (m, 2) m): each joint's bodies and
+    its anchors in their frames, from ``joints`` (rows with keys a, b, local_a, local_b: a log's
+    `WorldTable.joints`, `recorder.mcap_writer.joint_table_rows`) or else from ``model.joints``
+    (such rows, or a Simulation model's `isaac.engine.joints.Joints` arrays); m = 0 without."""
+    if joints is None:
+        joints = getattr(model, "joints", None)
+    if hasattr(joints, "local_a"):  # arrays, one row per joint
+        cols = (joints.a, joints.b, joints.local_a, joints.local_b)
+    elif joints:
+        cols = tuple([row[key] for row in joints] for key in ("a", "b", "local_a", "local_b"))
+    else:
+        cols = ((), (), (), ())
+    a, b = (np.ascontiguousarray(c, dtype=np.int64) for c in cols[:2])
+    local_a, local_b = (np.ascontiguousarray(c, dtype=np.float64).reshape(-1, 2) for c in cols[2:])
+    return a, b, local_a, local_b

@@ -768,7 +768,12 @@ def _make_bare_writer(config: dict):
     # send_columns took 2-12 ms on the 500-body pile, and the run waited whenever it caught up)
     sys.setswitchinterval(0.0005)  # and the GIL comes back to this thread within 0.5 ms
     return RerunLogWriter(
-        config["path"], model, scene, impulse_scale=config["impulse_scale"], background=True
+        config["path"],
+        model,
+        scene,
+        impulse_scale=config["impulse_scale"],
+        background=True,
+        joints=config.get("joints", ()),
     )
 
 

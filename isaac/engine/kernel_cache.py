@@ -11,6 +11,8 @@ for isaac's files only, with `SOURCES_KEY` added to the source stamp numba compa
 
 from __future__ import annotations
 
+from isaac import kernel_loading  # noqa: F401  (cached kernels load without numba's compiler)
+
 
 def _sources_key(package_root) -> str:
     """sha256 (hex, 16 digits) of the sources every engine kernel may compile in: the files
