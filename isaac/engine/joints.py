@@ -14,11 +14,14 @@ state a step ends with keeps the chains together instead of letting them drift.
 
 Velocity constraints (Box2D 2.3's joints, sign conventions: an impulse P is applied as -P to a
 and +P to b at the anchors; v_a, w_a, v_b, w_b the bodies' velocities):
-- revolute: the anchors' relative velocity v_b + w_b x r_b - v_a - w_a x r_a = 0 (a 2x2
-  effective mass); a motor w_b - w_a = speed with |impulse| <= max_torque h; limits on the
+- revolute: the anchors' separation unchanged over the sub-step (`_end_separation`: each arm
+  turned by h w; to first order the relative velocity v_b + w_b x r_b - v_a - w_a x r_a = 0;
+  a 2x2 effective mass, of the arms the sub-step ends with when a body turns by more than
+  SLOW_TURN, `_slow_turns`); a motor w_b - w_a = speed with |impulse| <= max_torque h; limits on the
   angle q = wrap(angle_b - angle_a - reference) as one-sided constraints (impulse >= 0) that let
   a limit still open by C close within the sub-step (C / h, as speculative contacts do).
-- distance: along the unit axis u between the anchors: rigid (length fixed), a spring of
+- distance: along the unit axis u between the anchors: rigid (the length unchanged over the
+  sub-step, as the revolute's separation), a spring of
   frequency f and damping ratio z (Catto's soft constraint: omega = 2 pi f, a1 = 2 z + h omega,
   a2 = h omega a1, bias rate omega / a1, mass scale a2 / (1 + a2), impulse scale 1 / (1 + a2)),
   and one-sided limits min_length / max_length.
