@@ -24,6 +24,7 @@ any kernel of the engine or the recorder is loaded.
 
 from __future__ import annotations
 
+import gc
 import os
 
 EAGER_ENV = "ISAAC_EAGER_KERNEL_LOADING"
@@ -47,9 +48,17 @@ def install() -> bool:
     def load_overload(self, sig, target_context):
         # what the cached code is linked against: the runtime (allocation, reference counts)
         rtsys.initialize(target_context)
-        with self._guard_against_spurious_io_errors():
-            return self._load_overload(sig, target_context)
-        # None returned if the `with` block swallows an exception (as numba's own)
+        # a load makes thousands of objects (the unpickled library, the modules its
+        # environments import) and frees none: the cyclic collector would only walk them
+        paused = gc.isenabled()
+        gc.disable()
+        try:
+            with self._guard_against_spurious_io_errors():
+                return self._load_overload(sig, target_context)
+            # None returned if the `with` block swallows an exception (as numba's own)
+        finally:
+            if paused:
+                gc.enable()
 
     load_overload.isaac_lazy = True
     load_overload.__doc__ = current.__doc__
