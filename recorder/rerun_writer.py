@@ -239,6 +239,7 @@ class RerunLogWriter:
         joint_a, joint_b, local_a, local_b = joint_geometry(model, joints)
         self.joint_count = len(joint_a)
         self._moving_points = int(np.sum(self.vertex_count[self._not_concrete] + 1))
+        self._moving_count = int(np.sum(self._not_concrete))  # bodies drawn each step, at most
         self._drawing = Drawing(
             self.vertices_local, self.vertex_count, np.ascontiguousarray(self._not_concrete),
             joint_a, joint_b, local_a, local_b,
@@ -409,7 +410,7 @@ class RerunLogWriter:
 
         b = self.batch
         if not hasattr(self, "_caps"):
-            moving = int(np.sum(self._not_concrete))
+            moving = self._moving_count
             # a pile has 1-3 contact rows per body: rarely grown (untouched pages cost nothing)
             # (outline points, strips, contact rows, joint anchors)
             self._caps = [b * self._moving_points, b * moving, 4 * b * len(self.names)]
@@ -435,7 +436,7 @@ class RerunLogWriter:
         at = out.at
         need = [
             at[AT_POINTS] + steps * self._moving_points,
-            at[AT_STRIPS] + steps * int(np.sum(self._not_concrete)),
+            at[AT_STRIPS] + steps * self._moving_count,
             at[AT_ROWS] + rows,
             at[AT_JOINTS] + 2 * steps * self.joint_count,
         ]
