@@ -352,7 +352,7 @@ class RerunLogWriter:
         s = self._summary
         n, concrete = len(self.names), int(np.sum(self.concrete))
         lines = [f"# ISAAC run: {self.scene_name}", "", f"**{state}**", ""]
-        lines += [blueprint.legend_markdown(), "", "## Run", ""]
+        lines += [blueprint.legend_markdown(self.joint_count > 0), "", "## Run", ""]
         lines.append(f"- {n} bodies ({concrete} concrete), dt = {g(self.dt)} s")
         if s.first is not None:
             lines.append(
