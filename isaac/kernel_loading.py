@@ -11,9 +11,10 @@ need it, and numba's compiler refreshes the target itself before every compile
 
 Measured (cProfile, 2-core machine, warm cache): the refresh was 0.25-0.33 s of the 0.47 s
 that pyramid-10's first `Simulation.step()` took (11 kernels loaded), and 0.16-0.19 s of
-building its `Simulation`; whole-process start-up to the first step went from 0.64 to 0.51 s
-(median of 9 interleaved pairs). The kernels and their bits are numba's own: only the moment of
-the refresh moves (tests/test_kernel_loading.py).
+building its `Simulation`. With the collector paused while a kernel loads (below), the bench's
+whole-process start-up to that first step took 0.77-0.81 of its CPU time before (interleaved
+pairs, bench/README.md). The kernels and their bits are numba's own: only the moment of the
+refresh moves (tests/test_kernel_loading.py).
 
 `install()` replaces `numba.core.caching.Cache.load_overload` (numba 0.68's: refresh, then
 ``_load_overload``) by the same without the refresh, keeping the runtime's initialisation; it
