@@ -25,9 +25,11 @@ from bench.scenes import build, with_preset
 BLOCK = 100  # steps per timed block
 
 
-def _time_paired(scene, steps: int, mcap_path=None, rrd_path=None) -> dict:
+def _time_paired(scene, steps: int, mcap_path=None, rrd_path=None, batches=False) -> dict:
     """Two simulations of `scene` in lockstep, one plain and one recorded, timed in alternating
     blocks of BLOCK steps; the overhead is (recorded time) / (plain time) over all blocks - 1.
+    Steps are taken one `step()` at a time and written with `Recorder.write`; with ``batches``,
+    as `isaac run` takes them: `Simulation.batches` (its batch size), `Recorder.write_batch`.
 
     This machine's speed drifts by up to 1.6x from second to second (shared host), which made
     separate timings of plain and recorded runs, even interleaved ones, differ by more than the
@@ -41,27 +43,47 @@ def _time_paired(scene, steps: int, mcap_path=None, rrd_path=None) -> dict:
     from isaac.engine.simulation import Simulation
 
     plain, recorded = Simulation(scene), Simulation(scene)
-    for _ in range(20):  # load the compiled kernels outside the clock
-        plain.step()
-        recorded.step()
+    if batches:
+        from isaac.app.run import batch_size
+
+        size = batch_size(len(scene.bodies))
+    else:
+        for _ in range(20):  # load the compiled kernels outside the clock
+            plain.step()
+            recorded.step()
     from recorder import Recorder
 
     t_open = time.perf_counter()
     rec = Recorder(recorded, mcap_path=mcap_path, rrd_path=rrd_path)
-    rec.write(recorded.record())
+    if not batches:
+        rec.write(recorded.record())
     rec.wait_ready()
     rec.drain()
     opened = time.perf_counter() - t_open
+    if batches:  # (a fresh simulation's step 0 is written by the recorder itself)
+        for sim in (plain, recorded):  # the kernels (the writer's too) loaded off the clock
+            for batch in sim.batches(20 + size, size=size):
+                if sim is recorded:
+                    rec.write_batch(batch)
+        rec.drain(settle=True)
     t_plain = t_rec = 0.0
     done = 0
     while done < steps:
         n = min(BLOCK, steps - done)
         t0 = time.perf_counter()
-        for _ in range(n):
-            plain.step()
+        if batches:
+            for _ in plain.batches(n, size=size):
+                pass
+        else:
+            for _ in range(n):
+                plain.step()
         t1 = time.perf_counter()
-        for _ in range(n):
-            rec.write(recorded.step())
+        if batches:
+            for batch in recorded.batches(n, size=size):
+                rec.write_batch(batch)
+        else:
+            for _ in range(n):
+                rec.write(recorded.step())
         rec.drain(settle=done + n >= steps)
         t2 = time.perf_counter()
         t_plain += t1 - t0

@@ -11,9 +11,10 @@ need it, and numba's compiler refreshes the target itself before every compile
 
 Measured (cProfile, 2-core machine, warm cache): the refresh was 0.25-0.33 s of the 0.47 s
 that pyramid-10's first `Simulation.step()` took (11 kernels loaded), and 0.16-0.19 s of
-building its `Simulation`; whole-process start-up to the first step went from 0.64 to 0.51 s
-(median of 9 interleaved pairs). The kernels and their bits are numba's own: only the moment of
-the refresh moves (tests/test_kernel_loading.py).
+building its `Simulation`. With the collector paused while a kernel loads (below), the bench's
+whole-process start-up to that first step took 0.77-0.81 of its CPU time before (interleaved
+pairs, bench/README.md). The kernels and their bits are numba's own: only the moment of the
+refresh moves (tests/test_kernel_loading.py).
 
 `install()` replaces `numba.core.caching.Cache.load_overload` (numba 0.68's: refresh, then
 ``_load_overload``) by the same without the refresh, keeping the runtime's initialisation; it
@@ -24,6 +25,7 @@ any kernel of the engine or the recorder is loaded.
 
 from __future__ import annotations
 
+import gc
 import os
 
 EAGER_ENV = "ISAAC_EAGER_KERNEL_LOADING"
@@ -47,9 +49,17 @@ def install() -> bool:
     def load_overload(self, sig, target_context):
         # what the cached code is linked against: the runtime (allocation, reference counts)
         rtsys.initialize(target_context)
-        with self._guard_against_spurious_io_errors():
-            return self._load_overload(sig, target_context)
-        # None returned if the `with` block swallows an exception (as numba's own)
+        # a load makes thousands of objects (the unpickled library, the modules its
+        # environments import) and frees none: the cyclic collector would only walk them
+        paused = gc.isenabled()
+        gc.disable()
+        try:
+            with self._guard_against_spurious_io_errors():
+                return self._load_overload(sig, target_context)
+            # None returned if the `with` block swallows an exception (as numba's own)
+        finally:
+            if paused:
+                gc.enable()
 
     load_overload.isaac_lazy = True
     load_overload.__doc__ = current.__doc__

@@ -104,10 +104,11 @@ def series_style(name: str) -> rr.SeriesLines:
     )
 
 
-def legend_markdown() -> str:
-    """The colour legend in words (for the summary text beside the view)."""
+def legend_markdown(joints: bool = True) -> str:
+    """The colour legend in words (for the summary text beside the view); joints: whether the
+    run has any (else JOINT and ANCHOR are left out)."""
     lines = ["| colour | what |", "|---|---|"]
-    for k in LEGEND:
+    for k in LEGEND if joints else [k for k in LEGEND if k not in (JOINT, ANCHOR)]:
         lines.append(f"| {k.colour_name} | {k.label} (`{k.entity}`) |")
     return "\n".join(lines)
 

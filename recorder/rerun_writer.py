@@ -36,6 +36,22 @@ import rerun as rr
 from isaac.engine.records import CONTACT_FIELDS, StepRecord
 from isaac.errors import LogError
 from recorder import blueprint
+from recorder.rerun_batch import (
+    AT_JOINTS,
+    AT_POINTS,
+    AT_PUSHES,
+    AT_ROWS,
+    AT_STRIPS,
+    JOINTS,
+    PUSHES,
+    ROWS,
+    STRIPS,
+    Buffers,
+    Drawing,
+    batch_stats,
+    draw_steps,
+    step_outlines,
+)
 from recorder.shapes import drawn_shapes, joint_geometry
 
 APP_ID = "isaac"
@@ -129,10 +145,8 @@ assert _VEC2_TYPE == rr.components.Vector2DBatch._ARROW_DATATYPE
 
 
 def _load_kernels() -> None:
-    """Import and load the compiled kernels now (about 1 s the first time in a process), so
-    that the first steps of a run do not wait for them."""
-    from recorder.rerun_batch import Buffers, Drawing, draw_steps, step_outlines
-
+    """Load the compiled kernels now (compiled the first time: about 1 s), so that the
+    first steps of a run do not wait for them."""
     z1, z2, f2 = np.zeros(1), np.zeros((1, 2)), np.zeros((4, 2), dtype=np.float32)
     one = np.ones(1, dtype=np.int64)
     step_outlines(z1, z2, np.zeros(1, dtype=np.int64), np.zeros((1, 2, 2)), one, f2, 0)
@@ -215,7 +229,6 @@ class RerunLogWriter:
         background: bool = False,
         joints=None,
     ) -> None:
-        from recorder.rerun_batch import Drawing
 
         self.path = str(path)
         self.partial_path = self.path + ".partial"
@@ -239,6 +252,7 @@ class RerunLogWriter:
         joint_a, joint_b, local_a, local_b = joint_geometry(model, joints)
         self.joint_count = len(joint_a)
         self._moving_points = int(np.sum(self.vertex_count[self._not_concrete] + 1))
+        self._moving_count = int(np.sum(self._not_concrete))  # bodies drawn each step, at most
         self._drawing = Drawing(
             self.vertices_local, self.vertex_count, np.ascontiguousarray(self._not_concrete),
             joint_a, joint_b, local_a, local_b,
@@ -351,7 +365,7 @@ class RerunLogWriter:
         s = self._summary
         n, concrete = len(self.names), int(np.sum(self.concrete))
         lines = [f"# ISAAC run: {self.scene_name}", "", f"**{state}**", ""]
-        lines += [blueprint.legend_markdown(), "", "## Run", ""]
+        lines += [blueprint.legend_markdown(self.joint_count > 0), "", "## Run", ""]
         lines.append(f"- {n} bodies ({concrete} concrete), dt = {g(self.dt)} s")
         if s.first is not None:
             lines.append(
@@ -405,11 +419,10 @@ class RerunLogWriter:
         """Fresh arrays for a batch, sized like the last one's (they grow as needed); fresh
         because Rerun takes the arrays it is sent without copying and encodes them later, in
         its own threads."""
-        from recorder.rerun_batch import Buffers
 
         b = self.batch
         if not hasattr(self, "_caps"):
-            moving = int(np.sum(self._not_concrete))
+            moving = self._moving_count
             # a pile has 1-3 contact rows per body: rarely grown (untouched pages cost nothing)
             # (outline points, strips, contact rows, joint anchors)
             self._caps = [b * self._moving_points, b * moving, 4 * b * len(self.names)]
@@ -427,19 +440,19 @@ class RerunLogWriter:
     def _make_room(self, steps: int, rows: int) -> None:
         """Room in the batch's buffers for ``steps`` more steps holding ``rows`` contact rows,
         keeping what is buffered."""
-        from recorder.rerun_batch import AT_JOINTS, AT_POINTS, AT_ROWS, AT_STRIPS, Buffers
 
         if self._buffers_sent:
             self._new_buffers()
         out = self._out
         at = out.at
-        need = [
-            at[AT_POINTS] + steps * self._moving_points,
-            at[AT_STRIPS] + steps * int(np.sum(self._not_concrete)),
-            at[AT_ROWS] + rows,
-            at[AT_JOINTS] + 2 * steps * self.joint_count,
-        ]
-        if all(n <= c for n, c in zip(need, self._caps)):
+        caps = self._caps
+        need = (
+            int(at[AT_POINTS]) + steps * self._moving_points,
+            int(at[AT_STRIPS]) + steps * self._moving_count,
+            int(at[AT_ROWS]) + rows,
+            int(at[AT_JOINTS]) + 2 * steps * self.joint_count,
+        )
+        if need[0] <= caps[0] and need[1] <= caps[1] and need[2] <= caps[2] and need[3] <= caps[3]:
             return
         self._caps = [max(c, n, 2 * c if n > c else c) for n, c in zip(need, self._caps)]
         points, strips, rows_cap, joints = self._caps
@@ -463,7 +476,6 @@ class RerunLogWriter:
     ) -> list[np.ndarray]:
         """Closed float32 world outlines of the bodies in ``mask`` (one (c + 1, 2) array each),
         by the steps' kernel."""
-        from recorder.rerun_batch import step_outlines
 
         idx = np.flatnonzero(mask)
         sizes = self.vertex_count[idx] + 1
@@ -556,7 +568,6 @@ class RerunLogWriter:
         stats: the nine `/stats` values in STAT_NAMES order, or None. `write` and the Rerun
         writer process (`recorder.frames.RerunFrame`) both come here.
         """
-        from recorder.rerun_batch import draw_steps
 
         exists = np.asarray(exists, dtype=bool)
         if not self._static_done:
@@ -591,7 +602,6 @@ class RerunLogWriter:
         `batch_stats` checks every float on the way, `draw_steps`), and sent every ``batch``
         steps as columns. Returns how many steps were taken: all, or those before the first one
         holding a NaN or an infinity (the caller says which; nothing of it is drawn)."""
-        from recorder.rerun_batch import batch_stats, draw_steps
 
         rows = dict(zip(CONTACT_FIELDS, batch.row_arrays))
         stats = np.empty((batch.steps, len(STAT_NAMES)))
@@ -634,17 +644,6 @@ class RerunLogWriter:
 
     def _send(self) -> None:
         """Close the open batch and send it (with ``background``: hand it to the thread)."""
-        from recorder.rerun_batch import (
-            AT_JOINTS,
-            AT_POINTS,
-            AT_PUSHES,
-            AT_ROWS,
-            AT_STRIPS,
-            JOINTS,
-            PUSHES,
-            ROWS,
-            STRIPS,
-        )
 
         if not self._count:
             return

@@ -10,6 +10,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 ROOT = Path(__file__).resolve().parents[1]
 
 # modules that only numba's target refresh imports (numba.core.cpu.load_additional_registries),
@@ -55,6 +57,9 @@ def _run(scene: str, **env) -> dict:
     return json.loads(proc.stdout.strip().splitlines()[-1])
 
 
+@pytest.mark.skipif(
+    os.environ.get("NUMBA_DISABLE_JIT") == "1", reason="no kernel is loaded without the JIT"
+)
 def test_cached_kernels_load_without_the_compiler_registries_and_give_the_same_bits():
     _run("car.yaml")  # fills the cache if this checkout's kernels are not in it yet
     lazy = _run("car.yaml")

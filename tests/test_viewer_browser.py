@@ -38,8 +38,9 @@ def look(png: Path) -> dict:
     """What the screenshot shows, from its pixels (image rows grow downwards):
 
     view_fraction: the bounding box of the 2D view's background colour, as a fraction of the
-        window; floor_row: the topmost row of the lowest band of rows that are mostly concrete
-        colour (the floor, seen across the view); body_rows: rows of moving-body outline pixels.
+        window; view_box: that box, (top, bottom, left, right) rows and columns; floor_row: the
+        topmost row of the lowest band of rows that are mostly concrete colour (the floor, seen
+        across the view); body_rows: rows of moving-body outline pixels.
     """
     from PIL import Image
 
@@ -55,6 +56,7 @@ def look(png: Path) -> dict:
         return out
     top, bottom, left, right = rows[0], rows[-1], cols[0], cols[-1]
     out["view_fraction"] = (bottom - top + 1) * (right - left + 1) / (w * h)
+    out["view_box"] = (int(top), int(bottom), int(left), int(right))
     inside = image[top : bottom + 1, left : right + 1]
     concrete = _near(inside, blueprint.CONCRETE.rgb, 20)
     wide = np.flatnonzero(concrete.sum(axis=1) > 0.4 * inside.shape[1])
@@ -139,3 +141,45 @@ def test_the_pixel_check_tells_an_upside_down_scene_from_a_right_one(tmp_path):
     assert right_way_up(seen) and seen["floor_row"] == 40 + 880
     assert abs(seen["view_fraction"] - 1200 * 920 / (1600 * 1000)) < 1e-9
     assert not right_way_up(look(flipped))
+
+
+@pytest.mark.slow
+def test_the_web_viewer_draws_the_pendulums_rod_down_from_its_pivot(tmp_path):
+    chromium, why = ensure_chromium()
+    if chromium is None:
+        pytest.skip(f"no headless browser: {why}")
+    rrd = tmp_path / "pendulum.rrd"
+    run = subprocess.run(
+        [sys.executable, "-m", "isaac", "run", "scenes/pendulum.yaml", "--steps", "300"]
+        + ["--rrd", str(rrd), "--quiet"],
+        cwd=REPO,
+        capture_output=True,
+        text=True,
+    )
+    assert run.returncode == 0, run.stderr
+    from PIL import Image
+
+    png = tmp_path / "pendulum.png"
+    rod = pivot = None
+    with WebViewer(rrd) as viewer, Chromium(chromium, width=1600, height=1000) as browser:
+        browser.open(viewer.url)
+        deadline = time.monotonic() + LOAD_TIMEOUT_S
+        while time.monotonic() < deadline:
+            time.sleep(5)
+            browser.screenshot(png)
+            seen = look(png)
+            if seen["view_fraction"] <= 0.5:
+                continue
+            top, bottom, left, right = seen["view_box"]
+            view = np.asarray(Image.open(png).convert("RGB"))[top:bottom, left:right]
+            rod = np.argwhere(_near(view, blueprint.JOINT.rgb, 25))  # (row, column)
+            pivot = np.argwhere(_near(view, blueprint.CONCRETE.rgb, 20))
+            if len(rod) > 300 and len(pivot) > 50:
+                break
+    assert rod is not None and len(rod) > 300, f"{png}: no joint line drawn"
+    height = rod[:, 0].max() - rod[:, 0].min()
+    width = rod[:, 1].max() - rod[:, 1].min()
+    # a 1 m rod 0.1 rad or less off the vertical, in a view fitted to it: long and upright
+    assert height > 0.25 * view.shape[0] and width < 0.3 * height, (png, height, width)
+    # hanging: the pivot (the concrete box) at the rod's top end, the bob below it
+    assert abs(np.median(pivot[:, 0]) - rod[:, 0].min()) < 0.1 * height, png

@@ -96,6 +96,8 @@ def test_joint_lines_run_from_each_steps_anchor_on_a_to_its_anchor_on_b(tmp_path
     _check_joints_drawn(rrd, records)
     # drawn in the joints' classes of the legend, labels off (they covered small bodies)
     content = rrd_content(rrd)
+    ((text,),) = content[("/info", "TextDocument:text")].values()
+    assert blueprint.JOINT.label in text and blueprint.ANCHOR.label in text  # in the legend
     for kind, archetype in ((blueprint.JOINT, "LineStrips2D"), (blueprint.ANCHOR, "Points2D")):
         style = f"/world/{kind.entity}"
         assert content[(style, f"{archetype}:class_ids")] == {"static": [kind.class_id]}
