@@ -73,6 +73,10 @@ def _exercise() -> None:
             encoder.encode(sim.step())  # the staged step
         for record in sim.run(3):  # the fused driver
             encoder.encode(record)
+    # the timed drivers (isaac run --profile), with either solver
+    for scene in scenes[:3]:
+        scene = replace(scene, world=replace(scene.world, steps=3))
+        Simulation(scene, compile_ahead=False, profile=True).advance(3)
     # the finiteness check the recorder's stats fall back on (on a record of the run: every
     # array read-only, one tuple type)
     from isaac.engine.diagnostics import all_finite

@@ -123,6 +123,9 @@ def find_pairs(
     return count
 
 
+# (_sort_pairs, _stable_order and _before are inlined into find_pairs, which is compiled without
+# reference counts: a counted kernel called from it, returning a view, would leave the view's
+# count raised)
 @numba.njit(cache=True, nogil=True, inline="always")
 def _sort_pairs(pair_a, pair_b, count, n, per, slot, sorted_b):
     """Sort pairs by (a, b): counting sort by a, then insertion sort of each a's few b's.

@@ -12,9 +12,6 @@ from isaac.engine import kernel_cache  # noqa: F401  (first: keys the kernels' n
 # same bits as the pure-Python function the scene layer calls, on any machine (libm's last bit
 # differs between implementations).
 sin_cos = numba.njit(cache=True, nogil=True)(trig.sin_cos)
-# the same function inlined into transform, which then calls no other kernel (numba keeps the
-# reference counts of a kernel's arrays, an atomic update each per call, while a call is made)
-_sin_cos_inlined = numba.njit(cache=True, nogil=True, inline="always")(trig.sin_cos)
 
 
 @numba.njit(cache=True, nogil=True, _nrt=False)  # (no reference counts: see driver)
@@ -33,7 +30,7 @@ def transform(
     for i in range(n):
         if not exists[i]:
             continue
-        s, c = _sin_cos_inlined(angle[i])
+        s, c = sin_cos(angle[i])
         px = position[i, 0]
         py = position[i, 1]
         lo_x = np.inf
