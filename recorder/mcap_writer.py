@@ -711,12 +711,17 @@ class McapLogWriter:
             self._sink.append(buf, 0, end)
         return done
 
-    def write_records(self, buf: np.ndarray, start: int, end: int) -> None:
+    def write_records(self, buf: np.ndarray, start: int, end: int, hashed: bool = True) -> None:
         """Append whole steps already packed as Message records (`recorder.mcap_pack`) in
-        ``buf[start:end]`` (uint8), in this thread: what a writer process does with the records
-        its parent packs into shared memory."""
+        ``buf[start:end]`` (uint8, writable), in this thread: what a writer process does with
+        the records its parent packs into shared memory. hashed False: the state hashes are
+        written here first (`recorder.mcap_pack.put_hashes`)."""
         if self._queue is not None:
             raise LogError("write_records is for a writer without a background thread")
+        if not hashed:
+            from recorder.mcap_pack import put_hashes
+
+            put_hashes(buf, start, end, record_channels(bool(self.joints)))
         steps, last = self._sink.append(buf, start, end)
         if steps:
             self.steps_written += steps

@@ -317,6 +317,7 @@ class WriterProcess:
                 float(config["scene"]["dt"]),
                 record_channels(bool(joints)),
                 joints,
+                hashes=False,  # the child hashes (recorder.mcap_pack.put_hashes)
             )
         os.set_blocking(self._rep, False)
         payload = pickle.dumps(
@@ -866,14 +867,15 @@ def child_main(argv: list[str]) -> int:
                 writer.write(ring_u8 if writer.raw else ring, a, b)
                 reply(b"R", c)
             elif kind == b"B":  # Message records of whole steps (recorder.mcap_pack)
-                writer.write_records(ring_u8, a, a + b)
+                writer.write_records(ring_u8, a, a + b, hashed=False)
                 reply(b"R", c)
             elif kind == b"J":
                 data = commands.read(a)
                 if data is None:  # the parent died while sending these records
                     writer.abandon(reason=ABANDONED)
                     return 0
-                writer.write_records(np.frombuffer(data, dtype=np.uint8), 0, a)
+                records = np.frombuffer(bytearray(data), dtype=np.uint8)  # writable
+                writer.write_records(records, 0, a, hashed=False)
             elif kind == b"I":
                 data = commands.read(a)
                 if data is None:  # the parent died while sending this frame
