@@ -443,10 +443,13 @@ class BatchPacker:
 
     model: ``names``, ``mass``, ``inertia``, ``concrete`` and what `/world` needs
     (`recorder.mcap_writer.encode_world`); gravity: (gx, gy) m/s^2; dt: s; channels:
-    `Channels`; joints: `recorder.mcap_writer.joint_table_rows` (``()`` without).
+    `Channels`; joints: `recorder.mcap_writer.joint_table_rows` (``()`` without). hashes: False
+    leaves each step's 64 hash digits unwritten, for `put_hashes` where the records are entered.
     """
 
-    def __init__(self, model, gravity, dt: float, channels: Channels, joints=()) -> None:
+    def __init__(
+        self, model, gravity, dt: float, channels: Channels, joints=(), *, hashes: bool = True
+    ) -> None:
         from recorder.mcap_writer import LogClock
 
         self.model = model
@@ -458,7 +461,10 @@ class BatchPacker:
         self.clock_dt = float(dt)
         self.channels = channels
         self.joints = joints
-        self.sha256 = hash_function()
+        # hashes False: the state hashes are left for where the records are entered
+        # (`put_hashes`, a writer process)
+        self.hashes = hashes
+        self.sha256 = hash_function() if hashes else 0
 
     def plan(self, batch, last_exists) -> BatchPlan:
         """What packing ``batch`` takes: each step's bytes (its /world record included), the
@@ -506,7 +512,7 @@ class BatchPacker:
             offsets, rows, joints, self.mass, self.inertia, self.concrete, *self.gravity,
             self.sha256, hash_at,
         )  # fmt: skip
-        if self.sha256 == 0:
+        if self.sha256 == 0 and self.hashes:
             fill_hashes(buf, lo, done, hash_at, state)
         return int(done), int(end), int(why)
 
@@ -646,3 +652,105 @@ def batch_arguments(batch) -> tuple:
         batch.row_arrays,
         tuple(_no_joints(batch.steps) if joints is None else joints),
     )
+
+
+# -- the state hash written where the records are entered (a writer process) ----------------------
+@numba.njit(cache=True, nogil=True)
+def _body_fields(buf, at, stop, spans):
+    """(start, bytes) of the payloads of Bodies fields 3 .. 7 (position, angle, velocity,
+    angular velocity, exists) of the message in ``buf[at:stop]`` into ``spans`` (5, 2), (0, 0)
+    for a field left out."""
+    spans[:] = 0
+    while at < stop:
+        key = 0
+        shift = 0
+        while True:
+            byte = buf[at]
+            at += 1
+            key |= np.int64(byte & 0x7F) << shift
+            shift += 7
+            if byte < 0x80:
+                break
+        wire = key & 7
+        if wire == 0:
+            while buf[at] >= 0x80:
+                at += 1
+            at += 1
+        elif wire == 1:
+            at += 8
+        else:
+            length = 0
+            shift = 0
+            while True:
+                byte = buf[at]
+                at += 1
+                length |= np.int64(byte & 0x7F) << shift
+                shift += 7
+                if byte < 0x80:
+                    break
+            number = key >> 3
+            if 3 <= number <= 7:
+                spans[number - 3, 0] = at
+                spans[number - 3, 1] = length
+            at += length
+
+
+@numba.njit(cache=True, nogil=True)
+def hash_inputs(buf, start, end, bodies_channel, stats_channel):
+    """For each step of the records in ``buf[start:end]`` (each step's `/bodies` record before
+    its `/stats` record): the bytes its state hash covers, end to end (uint8), where each step's
+    part ends in them, and where its 64 hash digits go (the end of its `/stats` record)."""
+    starts, ends, channel, sequence, log_time = scan_records(buf, start, end)
+    steps = 0
+    total = 0
+    spans = np.zeros((5, 2), dtype=np.int64)
+    for r in range(starts.shape[0]):
+        if channel[r] == stats_channel:
+            steps += 1
+        elif channel[r] == bodies_channel:
+            _body_fields(buf, starts[r] + RECORD_HEAD, ends[r], spans)
+            total += spans[:, 1].sum()
+    data = np.empty(total, dtype=np.uint8)
+    bounds = np.zeros(steps + 1, dtype=np.int64)
+    hash_at = np.empty(steps, dtype=np.int64)
+    at = 0
+    s = 0
+    for r in range(starts.shape[0]):
+        if channel[r] == bodies_channel:
+            _body_fields(buf, starts[r] + RECORD_HEAD, ends[r], spans)
+            for f in range(5):
+                p0 = spans[f, 0]
+                for i in range(spans[f, 1]):
+                    data[at + i] = buf[p0 + i]
+                at += spans[f, 1]
+        elif channel[r] == stats_channel:
+            bounds[s + 1] = at
+            hash_at[s] = ends[r] - HASH_HEX
+            s += 1
+    return data, bounds, hash_at
+
+
+@numba.njit(cache=True, nogil=True)
+def _put_hashes(fn, buf, data, bounds, hash_at):
+    digest = np.empty(32, dtype=np.uint8)
+    for s in range(hash_at.shape[0]):
+        sha256_digest(fn, data[bounds[s] : bounds[s + 1]], digest)
+        at = hash_at[s]
+        for i in range(32):
+            buf[at + 2 * i] = _HEX[digest[i] >> 4]
+            buf[at + 2 * i + 1] = _HEX[digest[i] & 15]
+
+
+def put_hashes(buf, start: int, end: int, channels: Channels) -> None:
+    """Write the state hash of every step of the records in ``buf[start:end]``, packed without
+    them (`BatchPacker` with ``hashes=False``), from the body fields in their `/bodies`
+    records: what a writer process does, so that its parent does not hash."""
+    data, bounds, hash_at = hash_inputs(buf, start, end, channels.bodies, channels.stats)
+    fn = hash_function()
+    if fn:
+        _put_hashes(fn, buf, data, bounds, hash_at)
+        return
+    for s in range(len(hash_at)):
+        digest = hashlib.sha256(data[bounds[s] : bounds[s + 1]]).hexdigest().encode("ascii")
+        at = int(hash_at[s])
+        buf[at : at + HASH_HEX] = np.frombuffer(digest, dtype=np.uint8)

@@ -585,15 +585,25 @@ class McapLogWriter:
             )
             self._thread.start()
 
-    def write(self, record: StepRecord, stats: dict) -> None:
+    def write(self, record: StepRecord, stats: dict | None = None) -> bool | None:
         """Append one step (its state, contacts and stats); ``/world`` when existence changed.
 
-        ``stats`` may leave out ``state_hash``: it is then computed here. With a writer thread,
-        the record (immutable) is handed over as it is and encoded, hashed and written there,
-        beside the next step (the engine's kernels release the GIL).
+        stats None (a writer that `takes_batches`): the step goes as a batch of one
+        (`write_batch`: packed by the compiled packer, which computes the /stats values and the
+        state hash); returns False, writing nothing, when a float of the record is NaN or
+        infinite (or its rows are not manifolds). Given ``stats`` (``state_hash`` may be left
+        out: it is then computed here), the messages are made by the Python encoders of this
+        module, the reference the packer is tested against. With a writer thread, the record
+        (immutable) is handed over as it is and encoded, hashed and written there.
         """
         if self._error is not None:
             raise LogError(f"writing {self.partial_path} failed: {self._error}")
+        if stats is None:
+            if not self.takes_batches:
+                raise LogError("this MCAP writer needs each step's /stats values")
+            from recorder.mcap_pack import one_step_batch
+
+            return self.write_batch(one_step_batch(record, self.clock_dt)) == 1
         item = (record, stats, self._count(record.step, record.exists))
         if self._queue is None:
             self._emit(item)
@@ -633,6 +643,12 @@ class McapLogWriter:
                 f"{len(self.joints)}"
             )
         return encode_joints(record.step, record.time, record.joints)
+
+    @property
+    def checks_finite(self) -> bool:
+        """Whether `write` refuses a record holding a NaN or an infinity itself (given no
+        stats: the packer's check); `Recorder.write` then leaves the check to it."""
+        return self.takes_batches
 
     @property
     def takes_batches(self) -> bool:
@@ -695,12 +711,17 @@ class McapLogWriter:
             self._sink.append(buf, 0, end)
         return done
 
-    def write_records(self, buf: np.ndarray, start: int, end: int) -> None:
+    def write_records(self, buf: np.ndarray, start: int, end: int, hashed: bool = True) -> None:
         """Append whole steps already packed as Message records (`recorder.mcap_pack`) in
-        ``buf[start:end]`` (uint8), in this thread: what a writer process does with the records
-        its parent packs into shared memory."""
+        ``buf[start:end]`` (uint8, writable), in this thread: what a writer process does with
+        the records its parent packs into shared memory. hashed False: the state hashes are
+        written here first (`recorder.mcap_pack.put_hashes`)."""
         if self._queue is not None:
             raise LogError("write_records is for a writer without a background thread")
+        if not hashed:
+            from recorder.mcap_pack import put_hashes
+
+            put_hashes(buf, start, end, record_channels(bool(self.joints)))
         steps, last = self._sink.append(buf, start, end)
         if steps:
             self.steps_written += steps

@@ -288,9 +288,17 @@ class Recorder:
         ):
             stats = compute_stats(self.model, self.gravity, record, with_hash=False)
         for writer in (self.mcap, self.rerun):
-            if writer is not None and writer.write(record, stats) is False:
-                # a writer process found a NaN or infinity while copying: nothing was sent
+            if writer is None:
+                continue
+            # a writer that checks the record computes its stats in the same pass
+            given = None if getattr(writer, "checks_finite", False) else stats
+            if writer.write(record, given) is False:
+                # the writer found a NaN or infinity (or rows that are not manifolds) while
+                # packing: nothing was written; named by the checks of write_batch
+                from recorder.mcap_writer import manifold_starts
+
                 check_finite(self.model.names, record)
+                manifold_starts(record.contacts)
                 raise SimulationError(
                     f"step {record.step}: a recorded value is not finite", step=record.step
                 )

@@ -146,7 +146,9 @@ def plan_cpus(writers: int) -> tuple[set[int], list[set[int]]] | None:
 
 # a recording expected to be smaller than this is written by a thread even on an idle machine:
 # writer processes took 3.4-4.0 s to start and 0.9-1.9 s to finish on the loaded 2-core machine
-# (a thread 0.08 s and 0.03 s), more than a short run takes
+# (a thread 0.08 s and 0.03 s), more than a short run takes; and with the packed-record path
+# (2026-12-02) their parent still packs every record, so on the small scenes they were the
+# slowest mode even once started (choose_offload)
 SMALL_RUN_BYTES = 200_000_000
 
 
@@ -161,14 +163,20 @@ def choose_offload(
     one-minute load average, this process included) and the recording is not small (log_bytes:
     its expected MCAP size, when known, at least SMALL_RUN_BYTES), else "thread".
 
-    Measured on the 2-core machine with two other busy processes (load 5-6), whole recorded
-    runs: head_on 20,000 steps MCAP: process 12.6 s, thread 3.8 s, none 16.9 s; default scene
-    600 steps MCAP + .rrd: process 24.9 s, thread 5.4 s, none 6.5 s; pile MCAP + .rrd: 14.4,
-    8.0, 9.1 s. Writer processes pay only when they have CPUs to themselves (the recording
-    bench, on an idle machine: see bench/README.md). On the idle machine (load 0.4) "none" beat
-    "thread" for short runs (head_on 20,000 steps MCAP: 4.6 against 6.1 s; default MCAP + .rrd:
-    3.2 against 3.9 s): the thread takes records one by one, "none" packs whole batches; a
-    thread given the batch path should beat both, and then this choice is to be measured again.
+    Measured again 2026-12-02 with the packed-record path, where every mode takes whole
+    batches (bench/README.md, "Writing MCAP"; the 2-core machine at load average 2-3.5 from
+    other work): `isaac run SCENE --steps 50000 --mcap`, whole process, medians of 3: head_on
+    none 1.61 s, thread 1.79, process 2.54 (no file 1.07); bounce 2.30, 3.24, 4.63; off_centre
+    2.75, 3.27, 4.70; a paired comparison of head_on (5 pairs, load 1.6) put thread at 1.05x
+    (0.98-1.10) none's wall time, and an earlier pass at load 3 at 0.75x (1.65 against 2.21 s:
+    the thread pays when a core is free). Writer processes stay the slowest for small runs (their
+    start-up, and the parent packs every record all the same): hence "thread" below
+    SMALL_RUN_BYTES, where it costs at most about 5 % more than "none" and gains when a core is
+    free, and for `--mcap --rrd`, where it overlaps the MCAP writing with the Rerun writer.
+    Before the packed records (whole runs, load 5-6): head_on 20,000 steps MCAP: process 12.6 s,
+    thread 3.8 s, none 16.9 s; default scene MCAP + .rrd: 24.9, 5.4, 6.5 s; pile MCAP + .rrd:
+    14.4, 8.0, 9.1 s. Writer processes pay only when they have CPUs to themselves (the recording
+    bench, on an idle machine: see bench/README.md).
     """
     if cpus is None:
         try:
@@ -309,6 +317,7 @@ class WriterProcess:
                 float(config["scene"]["dt"]),
                 record_channels(bool(joints)),
                 joints,
+                hashes=False,  # the child hashes (recorder.mcap_pack.put_hashes)
             )
         os.set_blocking(self._rep, False)
         payload = pickle.dumps(
@@ -863,14 +872,15 @@ def child_main(argv: list[str]) -> int:
                 writer.write(ring_u8 if writer.raw else ring, a, b)
                 reply(b"R", c)
             elif kind == b"B":  # Message records of whole steps (recorder.mcap_pack)
-                writer.write_records(ring_u8, a, a + b)
+                writer.write_records(ring_u8, a, a + b, hashed=False)
                 reply(b"R", c)
             elif kind == b"J":
                 data = commands.read(a)
                 if data is None:  # the parent died while sending these records
                     writer.abandon(reason=ABANDONED)
                     return 0
-                writer.write_records(np.frombuffer(data, dtype=np.uint8), 0, a)
+                records = np.frombuffer(bytearray(data), dtype=np.uint8)  # writable
+                writer.write_records(records, 0, a, hashed=False)
             elif kind == b"I":
                 data = commands.read(a)
                 if data is None:  # the parent died while sending this frame

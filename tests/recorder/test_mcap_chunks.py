@@ -143,3 +143,28 @@ def test_log_times_of_a_batch_are_the_clocks_one_by_one():
         clock = LogClock(dt)
         first = 10**9 - 3
         assert list(clock.times(first, 50)) == [clock(first + k) for k in range(50)]
+
+
+@pytest.mark.parametrize("openssl", [True, False])
+def test_hashes_written_where_the_records_are_entered_are_the_packers(monkeypatch, openssl):
+    # a writer process's parent packs without the hashes; the child writes them from the
+    # /bodies records (recorder.mcap_pack.put_hashes): the same bytes as packing them
+    from recorder.mcap_writer import joint_table_rows, record_channels
+
+    sim = Simulation(load_scene("scenes/car.yaml"))  # joints: /joints between /contacts, /stats
+    batch = next(iter(sim.batches(40, size=40)))
+    channels = record_channels(True)
+    out = []
+    for hashes in (True, False):
+        packer = MP.BatchPacker(sim.model, sim.scene.world.gravity, batch.dt, channels,
+                                joint_table_rows(sim.scene.joints), hashes=hashes)  # fmt: skip
+        plan = packer.plan(batch, None)
+        buf = np.zeros(int(plan.sizes.sum()), dtype=np.uint8)
+        done, end, _ = packer.pack(buf, 0, 0, batch.steps, batch, plan)
+        assert (done, end) == (batch.steps, len(buf))
+        out.append(buf)
+    assert not np.array_equal(out[0], out[1])  # the digits left out
+    if not openssl:
+        monkeypatch.setattr(MP, "hash_function", lambda: 0)
+    MP.put_hashes(out[1], 0, len(out[1]), channels)
+    assert out[1].tobytes() == out[0].tobytes()
