@@ -36,6 +36,7 @@ from llvmlite import ir
 from numba import types
 from numba.extending import intrinsic, overload
 
+from recorder import kernel_cache  # noqa: F401  (first: keys the kernels' numba cache)
 from recorder.pack import (
     _finite,
     _head,

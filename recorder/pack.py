@@ -26,6 +26,7 @@ from numba.extending import intrinsic, overload
 
 from isaac.engine.diagnostics import _sums
 from isaac.engine.records import CONTACT_FIELDS as RECORD_CONTACT_FIELDS
+from recorder import kernel_cache  # noqa: F401  (first: keys the kernels' numba cache)
 
 # the fields of Bodies (numbers 3-7), in the order of recorder.schema; CONTACT_FIELDS are the
 # record's (`isaac.engine.records.Contacts`): a NaN's field index is in BODY_FIELDS +

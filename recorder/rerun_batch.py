@@ -29,6 +29,7 @@ import numba
 import numpy as np
 
 from isaac.engine.diagnostics import _sums
+from recorder import kernel_cache  # noqa: F401  (first: keys the kernels' numba cache)
 
 # the columns of Buffers.per_step and the cursors of Buffers.at
 STRIPS, ROWS, PUSHES, JOINTS = 0, 1, 2, 3  # per_step: strips, contact rows, push arrows, joints

@@ -76,3 +76,31 @@ def test_an_edit_to_geometry_alone_recompiles_the_cached_driver(tmp_path):
     geometry = tree / "isaac" / "engine" / "geometry.py"
     geometry.write_text(geometry.read_text() + "\n# an edit that changes no code\n")
     assert hits() == 0  # the driver's cache is stale: compiled again
+
+
+def test_a_recorder_kernels_cache_stamp_carries_the_recorders_key():
+    from recorder import kernel_cache as recorder_key
+    from recorder import mcap_pack
+
+    kernel = next(
+        k for k in vars(mcap_pack).values() if hasattr(getattr(k, "_cache", None), "_impl")
+    )
+    locator = kernel._cache._impl.locator
+    assert type(locator).__name__.startswith("RecorderSources")
+    assert locator.get_source_stamp()[1] == recorder_key.SOURCES_KEY
+
+
+def test_the_recorders_key_changes_with_any_recorder_file_and_with_the_engine(tmp_path):
+    from recorder import kernel_cache as recorder_key
+
+    copy = tmp_path / "recorder"
+    shutil.copytree(ROOT / "recorder", copy, ignore=shutil.ignore_patterns("__pycache__"))
+
+    def key(seed=engine.SOURCES_KEY):
+        return engine.files_key(copy, copy.glob("*.py"), seed=seed)
+
+    assert key() == recorder_key.SOURCES_KEY
+    assert key(seed="another engine") != recorder_key.SOURCES_KEY
+    pack = copy / "pack.py"
+    pack.write_text(pack.read_text() + "\n# an edit\n")
+    assert key() != recorder_key.SOURCES_KEY

@@ -14,33 +14,42 @@ from __future__ import annotations
 from isaac import kernel_loading  # noqa: F401  (cached kernels load without numba's compiler)
 
 
-def _sources_key(package_root) -> str:
-    """sha256 (hex, 16 digits) of the sources every engine kernel may compile in: the files
-    of isaac/engine, isaac/trig.py and isaac/collision_filter.py, by relative path and
-    content."""
+def files_key(root, paths, seed: str = "") -> str:
+    """sha256 (hex, 16 digits) of `seed` and of `paths` (below `root`) by relative path and
+    content, in sorted order: the stamp a cached kernel compiled from those sources carries."""
     import hashlib
     from pathlib import Path
 
-    root = Path(package_root)
-    h = hashlib.sha256()
-    shared = [root / "trig.py", root / "collision_filter.py"]
-    for path in sorted([*(root / "engine").rglob("*.py"), *shared]):
-        h.update(path.relative_to(root).as_posix().encode())
+    root = Path(root)
+    h = hashlib.sha256(seed.encode())
+    for path in sorted(paths):
+        h.update(Path(path).relative_to(root).as_posix().encode())
         h.update(b"\0")
-        h.update(path.read_bytes())
+        h.update(Path(path).read_bytes())
     return h.hexdigest()[:16]
 
 
-def _key_kernel_caches() -> str:
-    """Install the keyed locators (once a process); returns the key."""
+def _sources_key(package_root) -> str:
+    """The engine's key: the files of isaac/engine, isaac/trig.py and isaac/collision_filter.py,
+    the sources every engine kernel may compile in."""
+    from pathlib import Path
+
+    root = Path(package_root)
+    shared = [root / "trig.py", root / "collision_filter.py"]
+    return files_key(root, [*(root / "engine").rglob("*.py"), *shared])
+
+
+def key_kernel_caches(root, key: str, label: str) -> str:
+    """Key numba's cache of every kernel defined in a file below `root` by `key` (once a
+    process per label): numba's own locators (NUMBA_CACHE_DIR, then the in-tree __pycache__),
+    with `key` added to the source stamp numba compares. Files elsewhere keep numba's own
+    cache. Returns `key`."""
     import os
     from pathlib import Path
 
     from numba.core import caching
 
-    root = Path(__file__).resolve().parents[1]
-    key = _sources_key(root)
-    inside = str(root) + os.sep
+    inside = str(Path(root).resolve()) + os.sep
 
     def keyed(base):
         class Keyed(base):
@@ -53,16 +62,24 @@ def _key_kernel_caches() -> str:
             def get_source_stamp(self):
                 return (super().get_source_stamp(), key)
 
-        Keyed.__name__ = Keyed.__qualname__ = f"IsaacSources{base.__name__}"
+        Keyed.__name__ = Keyed.__qualname__ = f"{label}{base.__name__}"
         return Keyed
 
     classes = caching.CacheImpl._locator_classes  # shared by numba's cache implementations
-    if not any(c.__name__.startswith("IsaacSources") for c in classes):
+    if not any(c.__name__.startswith(label) for c in classes):
         classes[:0] = [
             keyed(caching.UserProvidedCacheLocator),
             keyed(caching.InTreeCacheLocator),
         ]
     return key
+
+
+def _key_kernel_caches() -> str:
+    """Install the engine's keyed locators (once a process); returns the key."""
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1]
+    return key_kernel_caches(root, _sources_key(root), "IsaacSources")
 
 
 SOURCES_KEY = _key_kernel_caches()
