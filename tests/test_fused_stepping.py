@@ -213,3 +213,14 @@ def test_a_record_after_advance_goes_through_the_compiled_finiteness_check():
     sim.advance(25)
     record = sim.record()
     assert len(record.contacts) > 0 and all_finite(record)
+
+
+def test_a_record_after_batches_goes_through_the_compiled_finiteness_check():
+    from isaac.engine.diagnostics import all_finite
+
+    sim = Simulation(_pile("balanced"))
+    for _ in sim.batches(25, size=7):
+        pass
+    record = sim.record()
+    assert len(record.contacts) > 0 and all_finite(record)
+    assert all(getattr(record.contacts, f).flags.writeable for f in CONTACT_FIELDS)

@@ -230,18 +230,20 @@ class Simulation:
                 self._contacts = Contacts.empty()
                 self._joints = initial_joint_rows(self.model, self.state, self._work)
             else:
-                # private writable copies, like the staged step's (a record mixing writable
-                # and read-only arrays is typed apart by compiled consumers: all_finite failed)
                 made = StepBatch(self.state.step, self.scene.world.dt, batch, 1)
-                rows = made.contacts_of(0)
-                self._contacts = Contacts(*(getattr(rows, f).copy() for f in CONTACT_FIELDS))
-                joints = made.joints_of(0)
-                self._joints = (
-                    None
-                    if joints is None
-                    else JointRows(*(getattr(joints, f).copy() for f in JOINT_FIELDS))
-                )
+                self._keep_rows(made.contacts_of(0), made.joints_of(0))
         return self._contacts
+
+    def _keep_rows(self, contacts: Contacts, joints: JointRows | None) -> None:
+        """Keep private writable copies of a batch's rows as the current step's, like the staged
+        step's: a record mixing writable state with a batch's read-only rows is typed apart by
+        compiled consumers (all_finite raised a TypingError on it)."""
+        self._contacts = Contacts(*(getattr(contacts, f).copy() for f in CONTACT_FIELDS))
+        self._joints = (
+            None
+            if joints is None
+            else JointRows(*(getattr(joints, f).copy() for f in JOINT_FIELDS))
+        )
 
     def batches(self, steps: int | None = None, *, size: int = 64) -> Iterator[StepBatch]:
         """Advance `steps` steps (default: the scene's `world.steps`), `size` at a time, and
@@ -273,8 +275,7 @@ class Simulation:
             if taken:
                 batch = StepBatch(first + 1, self.scene.world.dt, arrays, taken)
                 last = batch.record(taken - 1)
-                self._contacts = last.contacts
-                self._joints = last.joints
+                self._keep_rows(last.contacts, last.joints)
                 self._last = last
                 yield batch
             if body >= 0:
