@@ -37,6 +37,7 @@ from numba import types
 from numba.extending import intrinsic, overload
 
 from recorder import kernel_cache  # noqa: F401  (first: keys the kernels' numba cache)
+from recorder.log_time import LogClock
 from recorder.pack import (
     _finite,
     _head,
@@ -442,18 +443,28 @@ class BatchPacker:
     process (`recorder.mcap_writer.McapLogWriter.write_batch`) or into a writer process's
     shared memory (`recorder.writer_process.WriterProcess.write_batch`).
 
-    model: ``names``, ``mass``, ``inertia``, ``concrete`` and what `/world` needs
-    (`recorder.mcap_writer.encode_world`); gravity: (gx, gy) m/s^2; dt: s; channels:
-    `Channels`; joints: `recorder.mcap_writer.joint_table_rows` (``()`` without). hashes: False
-    leaves each step's 64 hash digits unwritten, for `put_hashes` where the records are entered.
+    model: ``names``, ``mass``, ``inertia``, ``concrete`` and what `/world` needs;
+    gravity: (gx, gy) m/s^2; dt: s; channels: `Channels`; joints:
+    `recorder.mcap_writer.joint_table_rows` (``()`` without); encode_world: the `/world`
+    encoder, ``(model, step, time, exists, joints) -> bytes``
+    (`recorder.mcap_writer.encode_world`, passed in so that this module does not import the
+    writer that imports it). hashes: False leaves each step's 64 hash digits unwritten, for
+    `put_hashes` where the records are entered.
     """
 
     def __init__(
-        self, model, gravity, dt: float, channels: Channels, joints=(), *, hashes: bool = True
+        self,
+        model,
+        gravity,
+        dt: float,
+        channels: Channels,
+        joints=(),
+        *,
+        encode_world,
+        hashes: bool = True,
     ) -> None:
-        from recorder.mcap_writer import LogClock
-
         self.model = model
+        self.encode_world = encode_world
         self.mass = np.ascontiguousarray(model.mass, dtype=np.float64)
         self.inertia = np.ascontiguousarray(model.inertia, dtype=np.float64)
         self.concrete = np.ascontiguousarray(model.concrete, dtype=bool)
@@ -471,8 +482,6 @@ class BatchPacker:
         """What packing ``batch`` takes: each step's bytes (its /world record included), the
         /world records of the steps whose existence differs from the step before (the first
         step's from ``last_exists``, None: no step yet) and the log times."""
-        from recorder.mcap_writer import encode_world
-
         steps = batch.steps
         if batch.first + steps - 1 > MAX_SEQUENCE:
             from isaac.errors import LogError
@@ -493,7 +502,7 @@ class BatchPacker:
         parts = []
         for s in np.flatnonzero(changed):  # step 0 and bodies entering or leaving: rare
             step = batch.first + int(s)
-            data = encode_world(self.model, step, step * batch.dt, ex[s], self.joints)
+            data = self.encode_world(self.model, step, step * batch.dt, ex[s], self.joints)
             parts.append(message_record(self.channels.world, step, int(log_times[s]), data))
             world_at[s + 1] = len(parts[-1])
         np.cumsum(world_at, out=world_at)

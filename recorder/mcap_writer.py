@@ -27,7 +27,6 @@ import queue
 import sys
 import threading
 from dataclasses import asdict
-from fractions import Fraction
 from typing import NamedTuple
 
 import numpy as np
@@ -36,6 +35,7 @@ from mcap.writer import CompressionType, Writer
 from isaac.engine.records import StepRecord, state_hash
 from isaac.errors import LogError
 from recorder import schema as S
+from recorder.log_time import LogClock
 from recorder.shapes import circle_radii
 
 PROFILE = "isaac"
@@ -52,28 +52,6 @@ COMPRESSION = {
     "lz4": CompressionType.LZ4,
     "zstd": CompressionType.ZSTD,
 }
-
-
-class LogClock:
-    """``log_time`` (ns) of a step from its index, in integer arithmetic.
-
-    ``dt`` is turned into the exact rational value of its float64 bits, so
-    ``log_time(k) = round(k * dt * 1e9)`` exactly (halves rounded up), never accumulated.
-    """
-
-    def __init__(self, dt: float) -> None:
-        frac = Fraction(dt) * 1_000_000_000
-        self.num = frac.numerator
-        self.den = frac.denominator
-
-    def __call__(self, step: int) -> int:
-        return (2 * step * self.num + self.den) // (2 * self.den)
-
-    def times(self, first: int, count: int) -> np.ndarray:
-        """(count,) int64: the log times of steps first .. first + count - 1, each as
-        ``self(step)`` computes it (Python integers in numpy's loops: the products pass 2^63)."""
-        steps = np.arange(first, first + count, dtype=object)
-        return ((2 * self.num * steps + self.den) // (2 * self.den)).astype(np.int64)
 
 
 def channel_ids(joints: bool, foxglove: bool = False) -> dict[str, int]:
@@ -677,6 +655,7 @@ class McapLogWriter:
                 self.clock_dt,
                 record_channels(bool(self.joints)),
                 self.joints,
+                encode_world=encode_world,
             )
         last_exists = self._last_exists
         if self._queue is None:

@@ -308,7 +308,7 @@ class WriterProcess:
         self._last_exists = None  # existence at the last step sent (None: none yet)
         if kind == "mcap" and not config.get("foxglove") and self._compiled:
             from recorder.mcap_pack import BatchPacker
-            from recorder.mcap_writer import record_channels
+            from recorder.mcap_writer import encode_world, record_channels
 
             joints = config.get("joints", ())
             self._packer = BatchPacker(
@@ -317,6 +317,7 @@ class WriterProcess:
                 float(config["scene"]["dt"]),
                 record_channels(bool(joints)),
                 joints,
+                encode_world=encode_world,
                 hashes=False,  # the child hashes (recorder.mcap_pack.put_hashes)
             )
         os.set_blocking(self._rep, False)

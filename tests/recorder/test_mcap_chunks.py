@@ -149,7 +149,7 @@ def test_log_times_of_a_batch_are_the_clocks_one_by_one():
 def test_hashes_written_where_the_records_are_entered_are_the_packers(monkeypatch, openssl):
     # a writer process's parent packs without the hashes; the child writes them from the
     # /bodies records (recorder.mcap_pack.put_hashes): the same bytes as packing them
-    from recorder.mcap_writer import joint_table_rows, record_channels
+    from recorder.mcap_writer import encode_world, joint_table_rows, record_channels
 
     sim = Simulation(load_scene("scenes/car.yaml"))  # joints: /joints between /contacts, /stats
     batch = next(iter(sim.batches(40, size=40)))
@@ -157,7 +157,8 @@ def test_hashes_written_where_the_records_are_entered_are_the_packers(monkeypatc
     out = []
     for hashes in (True, False):
         packer = MP.BatchPacker(sim.model, sim.scene.world.gravity, batch.dt, channels,
-                                joint_table_rows(sim.scene.joints), hashes=hashes)  # fmt: skip
+                                joint_table_rows(sim.scene.joints), encode_world=encode_world,
+                                hashes=hashes)  # fmt: skip
         plan = packer.plan(batch, None)
         buf = np.zeros(int(plan.sizes.sum()), dtype=np.uint8)
         done, end, _ = packer.pack(buf, 0, 0, batch.steps, batch, plan)
