@@ -666,21 +666,27 @@ def batch_arguments(batch) -> tuple:
 
 # -- the state hash written where the records are entered (a writer process) ----------------------
 @numba.njit(cache=True, nogil=True)
+def _read_varint(buf, at):
+    """(value, the byte after it) of the protobuf varint at ``buf[at]``."""
+    value = 0
+    shift = 0
+    while True:
+        byte = buf[at]
+        at += 1
+        value |= np.int64(byte & 0x7F) << shift
+        shift += 7
+        if byte < 0x80:
+            return value, at
+
+
+@numba.njit(cache=True, nogil=True)
 def _body_fields(buf, at, stop, spans):
     """(start, bytes) of the payloads of Bodies fields 3 .. 7 (position, angle, velocity,
     angular velocity, exists) of the message in ``buf[at:stop]`` into ``spans`` (5, 2), (0, 0)
     for a field left out."""
     spans[:] = 0
     while at < stop:
-        key = 0
-        shift = 0
-        while True:
-            byte = buf[at]
-            at += 1
-            key |= np.int64(byte & 0x7F) << shift
-            shift += 7
-            if byte < 0x80:
-                break
+        key, at = _read_varint(buf, at)
         wire = key & 7
         if wire == 0:
             while buf[at] >= 0x80:
@@ -689,15 +695,7 @@ def _body_fields(buf, at, stop, spans):
         elif wire == 1:
             at += 8
         else:
-            length = 0
-            shift = 0
-            while True:
-                byte = buf[at]
-                at += 1
-                length |= np.int64(byte & 0x7F) << shift
-                shift += 7
-                if byte < 0x80:
-                    break
+            length, at = _read_varint(buf, at)
             number = key >> 3
             if 3 <= number <= 7:
                 spans[number - 3, 0] = at
