@@ -71,6 +71,24 @@ def look(png: Path) -> dict:
     return out
 
 
+def _browser_and_recording(scene: str, tmp_path: Path) -> tuple[str, Path]:
+    """Debian's Chromium (the test is skipped without it) and 300 steps of scenes/SCENE.yaml
+    recorded by `isaac run --rrd`, as a user would."""
+    chromium, why = ensure_chromium()
+    if chromium is None:
+        pytest.skip(f"no headless browser: {why}")
+    rrd = tmp_path / f"{scene}.rrd"
+    run = subprocess.run(
+        [sys.executable, "-m", "isaac", "run", f"scenes/{scene}.yaml", "--steps", "300"]
+        + ["--rrd", str(rrd), "--quiet"],
+        cwd=REPO,
+        capture_output=True,
+        text=True,
+    )
+    assert run.returncode == 0, run.stderr
+    return chromium, rrd
+
+
 def right_way_up(seen: dict) -> bool:
     rows = seen["body_rows"]
     floor = seen["floor_row"]
@@ -83,18 +101,7 @@ def right_way_up(seen: dict) -> bool:
 def test_the_web_viewer_shows_the_pile_above_its_floor_in_a_view_taking_most_of_the_window(
     tmp_path,
 ):
-    chromium, why = ensure_chromium()
-    if chromium is None:
-        pytest.skip(f"no headless browser: {why}")
-    rrd = tmp_path / "default.rrd"
-    run = subprocess.run(
-        [sys.executable, "-m", "isaac", "run", "scenes/default.yaml", "--steps", "300"]
-        + ["--rrd", str(rrd), "--quiet"],
-        cwd=REPO,
-        capture_output=True,
-        text=True,
-    )
-    assert run.returncode == 0, run.stderr
+    chromium, rrd = _browser_and_recording("default", tmp_path)
     png = tmp_path / "viewer.png"
     seen: dict = {}
     with WebViewer(rrd) as viewer, Chromium(chromium, width=1600, height=1000) as browser:
@@ -145,18 +152,7 @@ def test_the_pixel_check_tells_an_upside_down_scene_from_a_right_one(tmp_path):
 
 @pytest.mark.slow
 def test_the_web_viewer_draws_the_pendulums_rod_down_from_its_pivot(tmp_path):
-    chromium, why = ensure_chromium()
-    if chromium is None:
-        pytest.skip(f"no headless browser: {why}")
-    rrd = tmp_path / "pendulum.rrd"
-    run = subprocess.run(
-        [sys.executable, "-m", "isaac", "run", "scenes/pendulum.yaml", "--steps", "300"]
-        + ["--rrd", str(rrd), "--quiet"],
-        cwd=REPO,
-        capture_output=True,
-        text=True,
-    )
-    assert run.returncode == 0, run.stderr
+    chromium, rrd = _browser_and_recording("pendulum", tmp_path)
     from PIL import Image
 
     png = tmp_path / "pendulum.png"
