@@ -8,16 +8,22 @@ May import: the engine (`isaac.engine`), the scene contract (`isaac.scene`), `is
 the app; the engine never imports this package.
 """
 
-from recorder.recording import Recorder
-from recorder.stats import check_finite, compute_stats
-
 __all__ = ["Recorder", "LogReader", "check_finite", "compute_stats"]
+
+# imported lazily, so that `import recorder.spawn` (which `isaac run` does before it imports
+# the engine) and `import recorder` stay light
+_LAZY = {
+    "Recorder": "recorder.recording",
+    "LogReader": "recorder.reader",
+    "check_finite": "recorder.stats",
+    "compute_stats": "recorder.stats",
+}
 
 
 def __getattr__(name):
-    # the reader is imported lazily so `import recorder` stays light for the run loop
-    if name == "LogReader":
-        from recorder.reader import LogReader
+    module = _LAZY.get(name)
+    if module is None:
+        raise AttributeError(name)
+    import importlib
 
-        return LogReader
-    raise AttributeError(name)
+    return getattr(importlib.import_module(module), name)

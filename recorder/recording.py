@@ -62,6 +62,11 @@ class Recorder:
         "process" when the machine has an idle CPU per writer, else "thread":
         `recorder.writer_process.choose_offload`, which gives the measurements). The files'
         bytes are the same in all of them; ``self.offload`` says which was used.
+    children: writer processes started beforehand (`recorder.spawn.start_writer_child`),
+        keyed "mcap" and/or "rrd": those files are written by them whatever ``offload`` says,
+        which then applies to the other file. `isaac run` starts them before it imports the
+        engine, so that their start-up overlaps its own. The recorder owns them: any it does
+        not use (an error came first) are stopped.
     """
 
     def __init__(
@@ -77,6 +82,7 @@ class Recorder:
         impulse_scale: float | None = None,
         offload: str = "auto",
         replace_partial: bool = False,
+        children: dict | None = None,
     ) -> None:
         self.mcap = None
         self.rerun = None
@@ -90,17 +96,21 @@ class Recorder:
         try:
             if offload not in ("auto", "process", "thread", "none"):
                 raise ValueError("offload must be 'auto', 'process', 'thread' or 'none'")
+            self._children = dict(children or {})
+            if set(self._children) - {"mcap", "rrd"}:
+                raise ValueError("children are keyed 'mcap' and 'rrd'")
             if offload == "auto":
                 from recorder.writer_process import choose_offload
 
                 offload = choose_offload((mcap_path is not None) + (rrd_path is not None))
-            self.offload = offload
+            self.offload = _describe_offload(offload, self._children, mcap_path, rrd_path)
             self._claim(mcap_path, rrd_path, replace_partial)
         except BaseException:
             for c in (mcap_path, rrd_path):
                 if isinstance(c, OutputClaim):
                     c.release(discard=True)
             self._release_claims(discard=True)
+            self._discard_children()
             raise
         self._start_record: StepRecord | None = None
         try:
@@ -109,8 +119,14 @@ class Recorder:
                 self._start_record = sim.record()
                 self.write(self._start_record)
         except BaseException:
+            self._discard_children()
             self._abandon()
             raise
+
+    def _discard_children(self) -> None:
+        """Stop the started writer processes that no writer took (an error came first)."""
+        while self._children:
+            self._children.popitem()[1].discard()
 
     def _start(self, sim, scene_text, compression, flush_every, foxglove, impulse_scale, offload):
         # a step's messages are 100 kB and more: keep such buffers in the heap (isaac.tuning)
@@ -138,10 +154,17 @@ class Recorder:
                 self._cpus = iter(plan[1])
         if mcap is not None:
             self.mcap = self._mcap_writer(
-                mcap.path, offload, compression, flush_every, foxglove, impulse_scale
+                mcap.path,
+                "process" if "mcap" in self._children else offload,
+                compression,
+                flush_every,
+                foxglove,
+                impulse_scale,
             )
         if rrd is not None:
-            self.rerun = self._rerun_writer(rrd.path, offload, impulse_scale)
+            self.rerun = self._rerun_writer(
+                rrd.path, "process" if "rrd" in self._children else offload, impulse_scale
+            )
 
     def _claim(self, mcap_path, rrd_path, replace_partial: bool) -> None:
         paths = {"mcap_path": mcap_path, "rrd_path": rrd_path}
@@ -187,6 +210,7 @@ class Recorder:
                 path,
                 cpus=next(self._cpus, None),
                 keep_fd=self._lock_fd("mcap"),
+                child=self._children.pop("mcap", None),
                 config={
                     "model": model_table(self.model),
                     "gravity": self.gravity,
@@ -227,6 +251,7 @@ class Recorder:
                 path,
                 cpus=next(self._cpus, None),
                 keep_fd=self._lock_fd("rrd"),
+                child=self._children.pop("rrd", None),
                 config={
                     "model": model_table(self.model),
                     "gravity": self.gravity,
@@ -430,3 +455,13 @@ def _same_state(a: StepRecord, b: StepRecord) -> bool:
     return all(
         np.array_equal(getattr(a, f), getattr(b, f), equal_nan=f != "exists") for f in fields
     )
+
+
+def _describe_offload(offload: str, children: dict, mcap_path, rrd_path) -> str:
+    """`Recorder.offload`: the mode of every writer, or each file's when they differ
+    ("rrd process, mcap thread": the Rerun recording by a process started beforehand)."""
+    outputs = [k for k, p in (("mcap", mcap_path), ("rrd", rrd_path)) if p is not None]
+    modes = {k: "process" if k in children else offload for k in outputs}
+    if len(set(modes.values())) <= 1:
+        return next(iter(modes.values()), offload)
+    return ", ".join(f"{k} {modes[k]}" for k in sorted(outputs, key=lambda k: k != "rrd"))

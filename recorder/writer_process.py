@@ -11,9 +11,12 @@ written in-process.
 
 Transport (both ends in this module):
 - ring: shared memory (`ring_bytes_for`: 4-64 MiB; an anonymous ``memfd``, or an unlinked
-  temporary file where memfd is missing), handed to the child as a file descriptor. Each step
-  is one frame written contiguously at the next free offset, wrapping to 0 when it does not fit
-  before the end. A frame larger than the ring travels inline in the command pipe instead.
+  temporary file where memfd is missing), handed to the child as a file descriptor when it is
+  started (`recorder.spawn`: `isaac run` starts it before it imports the engine, the ring still
+  empty) and sized by the parent once it knows the scene; the child maps it when its
+  configuration, which gives the size, arrives. Each step is one frame written contiguously
+  at the next free offset, wrapping to 0 when it does not fit before the end. A frame larger
+  than the ring travels inline in the command pipe instead.
   MCAP frames (`recorder.frames`: `pack`, `Frame`): a head with the /stats values, then the encoded
   `/bodies` and `/contacts` messages, which the mcap library takes as they are. Rerun frames
   (`recorder.pack.pack_rerun`, `read_rerun_frame`): only what the recording draws, as raw
@@ -21,7 +24,8 @@ Transport (both ends in this module):
   (`RerunLogWriter.append`); decoding protobuf back into a record had cost that child a
   quarter of its time.
 - commands, parent -> child, each a 25-byte header ``<cQQQ`` (several in one ``os.write``):
-  ``C`` config (pickled dict follows, first message), ``F`` frame (offset, length, end),
+  ``C`` config (pickled dict follows, first message; its ``ring_bytes`` is the ring's size),
+  ``F`` frame (offset, length, end),
   ``B`` Message records of whole steps (offset, length, end; MCAP, `recorder.mcap_pack`),
   ``I`` inline frame (length; the frame follows), ``J`` inline records (length; they follow),
   ``S`` sync (number, settle flag; answered once every earlier frame is taken), ``Z`` close
@@ -54,7 +58,6 @@ import signal
 import struct
 import subprocess
 import sys
-import tempfile
 import time
 
 import numpy as np
@@ -75,6 +78,7 @@ from recorder.frames import (
     put_trailer,
     read_rerun_frame,
 )
+from recorder.spawn import WriterChild, start_writer_child
 
 # shared memory per writer, in frames of the scene's size, within RING_MIN..RING_MAX bytes,
 # mapped pre-faulted (a fresh page costs a fault in each process: writes over a cold 32 MiB
@@ -199,18 +203,6 @@ def _map(fd: int, size: int) -> mmap.mmap:
     return mmap.mmap(fd, size, flags=flags)
 
 
-def _shared_memory(size: int) -> int:
-    """A file descriptor of `size` bytes of memory the child can map (inheritable)."""
-    if hasattr(os, "memfd_create"):
-        fd = os.memfd_create("isaac-recorder", 0)
-    else:  # pragma: no cover - non-Linux
-        f = tempfile.TemporaryFile()
-        fd = os.dup(f.fileno())
-        f.close()
-    os.ftruncate(fd, size)
-    return fd
-
-
 class WriterProcess:
     """A log writer running in a child process; same calls as the in-process writers.
 
@@ -219,6 +211,8 @@ class WriterProcess:
     cpus: the CPUs the child may run on (`plan_cpus`); None: wherever the scheduler likes.
     keep_fd: a descriptor the child keeps open, unused, until it exits: the output's lock
         (`recorder.outputs.OutputClaim.fd`).
+    child: the process, when it was started earlier (`recorder.spawn.start_writer_child`,
+        which `isaac run` calls before it imports the engine); else it is started here.
     """
 
     def __init__(
@@ -230,6 +224,7 @@ class WriterProcess:
         ring_bytes: int | None = None,
         cpus: set[int] | None = None,
         keep_fd: int | None = None,
+        child: WriterChild | None = None,
     ):
         self.path = str(path)
         self.partial_path = self.path + ".partial"
@@ -237,6 +232,8 @@ class WriterProcess:
         try:  # say at once when the file cannot be written, not at the first step
             open(self.partial_path, "wb").close()
         except OSError as exc:
+            if child is not None:
+                child.discard()
             raise LogError(f"cannot write {self.partial_path}: {exc.strerror}") from exc
         if ring_bytes is None:
             ring_bytes = ring_bytes_for(kind, len(config["model"]["names"]))
@@ -252,40 +249,29 @@ class WriterProcess:
         self._synced = 0
         self._eof = False
         self._finished = False
-        ring_fd = _shared_memory(ring_bytes)
-        cmd_r, self._cmd = os.pipe()
-        self._rep, rep_w = os.pipe()
-        self._stderr = tempfile.TemporaryFile()
-        root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-        env = dict(os.environ)
-        env["PYTHONPATH"] = os.pathsep.join(p for p in (root, env.get("PYTHONPATH")) if p)
+        if child is None:
+            child = start_writer_child(kind, keep_fd)
+        elif child.kind != kind:
+            raise ValueError(f"a {child.kind} writer process cannot write {kind}")
+        self.proc, self._cmd, self._rep, self._stderr = (
+            child.proc,
+            child.cmd_fd,
+            child.reply_fd,
+            child.stderr,
+        )
         try:
-            self.proc = subprocess.Popen(
-                [
-                    sys.executable,
-                    "-m",
-                    "recorder.writer_process",
-                    str(cmd_r),
-                    str(rep_w),
-                    str(ring_fd),
-                    str(ring_bytes),
-                ],
-                pass_fds=(cmd_r, rep_w, ring_fd) + (() if keep_fd is None else (keep_fd,)),
-                stdin=subprocess.DEVNULL,
-                stdout=subprocess.DEVNULL,
-                stderr=self._stderr,
-                env=env,
-                process_group=0,
-            )
+            os.ftruncate(child.ring_fd, ring_bytes)
+            self._ring = _map(child.ring_fd, ring_bytes)
             if cpus:
                 try:
                     os.sched_setaffinity(self.proc.pid, cpus)
                 except OSError:
                     pass
-            self._ring = _map(ring_fd, ring_bytes)
+        except BaseException:
+            child.discard()
+            raise
         finally:
-            for fd in (cmd_r, rep_w, ring_fd):
-                os.close(fd)
+            os.close(child.ring_fd)
         self._view = memoryview(self._ring)
         self._ring_u8 = np.frombuffer(self._ring, dtype=np.uint8)
         model = config["model"]
@@ -322,7 +308,8 @@ class WriterProcess:
             )
         os.set_blocking(self._rep, False)
         payload = pickle.dumps(
-            {"kind": kind, "path": self.path, **config}, protocol=pickle.HIGHEST_PROTOCOL
+            {"kind": kind, "path": self.path, "ring_bytes": ring_bytes, **config},
+            protocol=pickle.HIGHEST_PROTOCOL,
         )
         self._send(b"C", len(payload), payload=payload)
 
@@ -827,11 +814,14 @@ def child_main(argv: list[str]) -> int:
     from isaac.tuning import reuse_large_buffers
 
     reuse_large_buffers()  # a step's messages are 100 kB and more (see isaac.tuning)
-    cmd_fd, rep_fd, ring_fd, ring_bytes = (int(x) for x in argv)
+    kind = argv[0]
+    cmd_fd, rep_fd, ring_fd = (int(x) for x in argv[1:])
     commands = _PolledReader(cmd_fd)
-    ring = _map(ring_fd, ring_bytes)
-    ring_u8 = np.frombuffer(ring, dtype=np.uint8)
-    os.close(ring_fd)
+    # the writer's libraries now, while the parent imports the engine (recorder.spawn)
+    if kind == "rerun":
+        import recorder.rerun_writer  # noqa: F401
+    else:
+        import recorder.mcap_writer  # noqa: F401
 
     parent_gone = False
 
@@ -859,7 +849,11 @@ def child_main(argv: list[str]) -> int:
         config = commands.read(length)
         if config is None:
             return 0
-        writer = _make_writer(pickle.loads(config))
+        config = pickle.loads(config)
+        ring = _map(ring_fd, config["ring_bytes"])  # sized by the parent once it knew the scene
+        ring_u8 = np.frombuffer(ring, dtype=np.uint8)
+        os.close(ring_fd)
+        writer = _make_writer(config)
         reply(b"K")
         while True:
             head = commands.read(_COMMAND.size)

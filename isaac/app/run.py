@@ -142,11 +142,51 @@ def _make_parent(out: str) -> None:
         raise LogError(f"cannot write {out}: cannot create {parent}: {exc.strerror}") from exc
 
 
-def cmd_run(args: argparse.Namespace) -> int:
-    from isaac.engine.simulation import (
-        Simulation,
-    )  # imported here: compiling kernels is not needed for --help
+def _plan_recording(args: argparse.Namespace, claims: dict, scene, steps: int) -> str:
+    """Where the files are written (``--offload``; ``auto``: `choose_offload` on the log's
+    expected size), saying first what a long run will write."""
+    from recorder.frames import ROWS_PER_MOVING_BODY as ROWS_PER_MOVING
+    from recorder.frames import expected_log_bytes
+    from recorder.writer_process import choose_offload
 
+    moving = sum(not b.concrete for b in scene.bodies)
+    per_step, total = expected_log_bytes(len(scene.bodies), moving, steps)
+    if args.mcap and total >= LONG_RUN_BYTES:  # a long run says first what it will write
+        share = COMPRESSED_SHARE.get(args.compression)
+        packed = f"; {args.compression} measured {share[0]:g}-{share[1]:g} of that" if share else ""
+        print(
+            f"expected MCAP log size: about {_size(total)} ({_size(per_step)} a step x "
+            f"{steps + 1} steps, uncompressed{packed}; contacts estimated at "
+            f"{ROWS_PER_MOVING:g} points per moving body)",
+            file=sys.stderr,
+        )
+    if args.offload != "auto":
+        return args.offload
+    # a short run does not wait for writer processes to start
+    return choose_offload(len(claims), log_bytes=total)
+
+
+def _start_writers(offload: str, claims: dict) -> dict:
+    """With offload "process", the writer processes started now, before the simulation is
+    built, so that their start-up (importing mcap or rerun-sdk, opening the file) overlaps the
+    building and the kernels' loading (`recorder.spawn`); {} otherwise."""
+    if offload != "process":
+        return {}
+    from recorder.spawn import start_writer_child
+
+    children = {}
+    try:
+        for k in ("mcap", "rrd"):
+            if k in claims:
+                children[k] = start_writer_child("rerun" if k == "rrd" else "mcap", claims[k].fd)
+    except BaseException:
+        for child in children.values():
+            child.discard()
+        raise
+    return children
+
+
+def cmd_run(args: argparse.Namespace) -> int:
     started = time.perf_counter()
     scene = load_scene(args.scene)
     steps = scene.world.steps if args.steps is None else args.steps
@@ -154,9 +194,17 @@ def cmd_run(args: argparse.Namespace) -> int:
         raise IsaacError(f"--steps must be >= 0, got {steps}")
     _warn("run", scene, steps)
     claims = _claim_outputs(args)
+    children = {}
     try:
+        offload = _plan_recording(args, claims, scene, steps) if claims else args.offload
+        children = _start_writers(offload, claims)
+        # imported here, after the writers started: compiling kernels is not needed for --help
+        from isaac.engine.simulation import Simulation
+
         sim = Simulation(scene, profile=args.profile)  # --profile: the timed driver
     except BaseException:
+        for child in children.values():
+            child.discard()
         for c in claims.values():
             c.release(discard=True)
         raise
@@ -177,28 +225,6 @@ def cmd_run(args: argparse.Namespace) -> int:
     try:
         if claims:
             from recorder import Recorder
-            from recorder.frames import ROWS_PER_MOVING_BODY as ROWS_PER_MOVING
-            from recorder.frames import expected_log_bytes
-            from recorder.writer_process import choose_offload
-
-            moving = sum(not b.concrete for b in scene.bodies)
-            per_step, total = expected_log_bytes(sim.n_bodies, moving, steps)
-            if args.mcap and total >= LONG_RUN_BYTES:  # a long run says first what it will write
-                share = COMPRESSED_SHARE.get(args.compression)
-                packed = (
-                    f"; {args.compression} measured {share[0]:g}-{share[1]:g} of that"
-                    if share
-                    else ""
-                )
-                print(
-                    f"expected MCAP log size: about {_size(total)} ({_size(per_step)} a step x "
-                    f"{steps + 1} steps, uncompressed{packed}; contacts estimated at "
-                    f"{ROWS_PER_MOVING:g} points per moving body)",
-                    file=sys.stderr,
-                )
-            offload = args.offload
-            if offload == "auto":  # a short run does not wait for writer processes to start
-                offload = choose_offload(len(claims), log_bytes=total)
 
             recorder = Recorder(
                 sim,
@@ -206,8 +232,9 @@ def cmd_run(args: argparse.Namespace) -> int:
                 rrd_path=claims.get("rrd"),
                 offload=offload,
                 compression=args.compression,
+                children=children,
             )
-            claims = {}  # the recorder owns them now
+            claims = children = {}  # the recorder owns them now
             recorder.write(first)
         if not args.quiet and sys.stderr.isatty():
             from tqdm import tqdm
@@ -244,7 +271,9 @@ def cmd_run(args: argparse.Namespace) -> int:
         try:
             if progress:
                 progress.close()
-            for c in claims.values():  # the recorder never started
+            for child in children.values():  # the recorder never started
+                child.discard()
+            for c in claims.values():
                 c.release(discard=True)
             if recorder:
                 if finished:

@@ -341,6 +341,54 @@ def test_writer_processes_write_the_same_bytes_as_writing_in_process(tmp_path, r
     assert paths["none"].read_bytes() == paths["process"].read_bytes()
 
 
+def test_writer_processes_started_before_the_recorder_write_the_same_files(tmp_path):
+    """`isaac run` starts the writer processes before it builds the simulation
+    (recorder.spawn); the recorder then adopts them: the Rerun one here, the MCAP log by the
+    thread `offload` names. Same MCAP bytes and Rerun content as writing in-process."""
+    from recorder.spawn import start_writer_child
+
+    sim, records = _records(n=30, contacts=20, steps=90, leave_at=40)
+    out = {}
+    for label in ("in-process", "started"):
+        mcap, rrd = tmp_path / f"{label}.mcap", tmp_path / f"{label}.rrd"
+        children = {"rrd": start_writer_child("rerun")} if label == "started" else {}
+        rec = Recorder(
+            sim,
+            mcap_path=str(mcap),
+            rrd_path=str(rrd),
+            scene_text=SCENE_TEXT,
+            compression="none",
+            offload="thread" if children else "none",
+            children=children,
+        )
+        assert rec.offload == ("rrd process, mcap thread" if children else "none")
+        assert isinstance(rec.rerun, W.WriterProcess) == bool(children)
+        for r in records:
+            rec.write(r)
+        rec.close()
+        out[label] = (mcap.read_bytes(), _rrd_content(rrd))
+    assert out["started"][0] == out["in-process"][0]
+    a, b = out["in-process"][1], out["started"][1]
+    assert sorted(a) == sorted(b)
+    for key, columns in a.items():
+        assert all(values.equals(b[key][name]) for name, values in columns.items()), key
+
+
+def test_a_started_writer_process_the_recorder_cannot_use_exits_and_writes_nothing(tmp_path):
+    """An error before the recorder takes its started processes (here: the two outputs are
+    the same file) stops them: no process is left behind and no file is written."""
+    from recorder.spawn import start_writer_child
+
+    sim, _ = _records(n=4, contacts=2, steps=1)
+    children = {"mcap": start_writer_child("mcap"), "rrd": start_writer_child("rerun")}
+    procs = [c.proc for c in children.values()]
+    same = str(tmp_path / "same")
+    with pytest.raises(LogError):
+        Recorder(sim, mcap_path=same, rrd_path=same, scene_text=SCENE_TEXT, children=children)
+    assert [p.poll() for p in procs] == [0, 0]  # exited, cleanly
+    assert list(tmp_path.iterdir()) == []
+
+
 def _mcap_config(rec):
     from recorder.mcap_writer import build_metadata
 

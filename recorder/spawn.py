@@ -1,0 +1,111 @@
+"""Starting a writer process before the engine is imported, so that its start-up overlaps ours.
+
+Why: a writer process spends most of a short run starting. The Rerun one imports rerun-sdk
+(0.37 s here, `python -X importtime`) and builds its recording stream and blueprint (0.1 s);
+started once the simulation was built, as `Recorder` used to, a 600-step run was over before
+the child was ready, and the whole process waited for it. Started from `isaac run` as soon as
+the outputs are claimed, the child imports its libraries while this process imports numpy and
+numba and loads the kernels; the two take the two CPUs of a small machine side by side.
+
+This module is light on purpose (standard library only, no numpy, no engine): importing it must
+not delay the start it exists to hasten. The child is `python -m recorder.writer_process`, which
+imports its writer's libraries at once and only then waits for its configuration (the ring's
+size and the scene's tables, which need the engine) on the command pipe; the protocol is in
+`recorder.writer_process`.
+"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import tempfile
+from dataclasses import dataclass
+
+KINDS = ("mcap", "rerun")
+
+
+@dataclass
+class WriterChild:
+    """A started writer process that has not been given its configuration yet.
+
+    cmd_fd: the parent's end of the command pipe; reply_fd: the parent's end of the reply pipe.
+    ring_fd: the shared memory the frames go through, created empty: the parent sizes it
+    (``os.ftruncate``) and maps it once it knows the scene, then tells the child its size in the
+    configuration. stderr: the child's standard error (a temporary file, already unlinked).
+    """
+
+    kind: str
+    proc: subprocess.Popen
+    cmd_fd: int
+    reply_fd: int
+    ring_fd: int
+    stderr: object
+
+    def discard(self) -> None:
+        """Stop a child that will never be configured: closing the command pipe before the
+        configuration makes it exit at once (status 0, no file written)."""
+        for fd in (self.cmd_fd, self.reply_fd, self.ring_fd):
+            try:
+                os.close(fd)
+            except OSError:
+                pass
+        try:
+            self.proc.wait(timeout=10)
+        except subprocess.TimeoutExpired:  # pragma: no cover - a stuck child
+            self.proc.kill()
+            self.proc.wait()
+        self.stderr.close()
+
+
+def _shared_memory() -> int:
+    """A file descriptor of (for now, zero bytes of) memory the child can map."""
+    if hasattr(os, "memfd_create"):
+        return os.memfd_create("isaac-recorder", 0)
+    f = tempfile.TemporaryFile()  # pragma: no cover - non-Linux
+    fd = os.dup(f.fileno())  # pragma: no cover
+    f.close()  # pragma: no cover
+    return fd  # pragma: no cover
+
+
+def start_writer_child(kind: str, keep_fd: int | None = None) -> WriterChild:
+    """Start the writer process of ``kind`` ("mcap" or "rerun"); it begins importing what it
+    writes with at once. keep_fd: a descriptor the child keeps open, unused, until it exits
+    (the output's lock, `recorder.outputs.OutputClaim.fd`)."""
+    if kind not in KINDS:
+        raise ValueError(f"writer kind must be one of {KINDS}, got {kind!r}")
+    ring_fd = _shared_memory()
+    cmd_r, cmd_w = os.pipe()
+    rep_r, rep_w = os.pipe()
+    stderr = tempfile.TemporaryFile()
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    env = dict(os.environ)
+    env["PYTHONPATH"] = os.pathsep.join(p for p in (root, env.get("PYTHONPATH")) if p)
+    try:
+        proc = subprocess.Popen(
+            [
+                sys.executable,
+                "-m",
+                "recorder.writer_process",
+                kind,
+                str(cmd_r),
+                str(rep_w),
+                str(ring_fd),
+            ],
+            pass_fds=(cmd_r, rep_w, ring_fd) + (() if keep_fd is None else (keep_fd,)),
+            stdin=subprocess.DEVNULL,
+            stdout=subprocess.DEVNULL,
+            stderr=stderr,
+            env=env,
+            # its own process group: Ctrl-C reaches the run loop, which closes the files
+            process_group=0,
+        )
+    except BaseException:
+        for fd in (cmd_w, rep_r, ring_fd):
+            os.close(fd)
+        stderr.close()
+        raise
+    finally:
+        os.close(cmd_r)
+        os.close(rep_w)
+    return WriterChild(kind, proc, cmd_w, rep_r, ring_fd, stderr)
