@@ -196,7 +196,7 @@ def pack_into(
     buf: np.ndarray,
     pos: int,
     record: StepRecord,
-    model,
+    masses: tuple,
     gravity,
     stats: dict | None = None,
     sizes: tuple[int, int] | None = None,
@@ -205,54 +205,35 @@ def pack_into(
     (uint8, ``frame_size(record)`` bytes from ``pos`` at least) with the compiled
     `recorder.pack.pack_frame`; little-endian machines only.
 
-    model: ``mass``, ``inertia`` (float64) and ``concrete`` (bool) arrays, for the /stats sums;
-    gravity: (gx, gy) m/s^2. stats: the /stats values to write instead of the computed ones.
-    sizes: the messages' sizes when the caller has them (`frame_sizes`). Returns False, the frame
+    masses: the model's (mass, inertia, concrete) bundle (`recorder.pack.model_bundle`), for
+    the /stats sums; gravity: (gx, gy) m/s^2. stats: the /stats values to write instead of the
+    computed ones. sizes: the messages' sizes when the caller has them (`frame_sizes`). Returns
+    False, the frame
     unusable, when a float of the record is NaN or infinite; ValueError when its contact rows
     are not manifolds (`recorder.mcap_writer.manifold_starts`).
     """
-    from recorder.pack import NOT_MANIFOLDS, pack_frame
+    from recorder.pack import NOT_MANIFOLDS, pack_frame, record_bundles
 
     bodies_size, contacts_size = sizes if sizes is not None else frame_sizes(record)[:2]
-    c = record.contacts
-    i32 = np.int32
+    state, rows = record_bundles(record)
     bad, bodies_len, contacts_len = pack_frame(
         buf,
         pos,
         int(record.step),
         float(record.time),
         int(record.angle.shape[0]),
-        len(c),
+        len(record.contacts),
         _pad8(bodies_size),
-        record.position,
-        record.angle,
-        record.velocity,
-        record.angular_velocity,
-        np.asarray(record.exists, dtype=bool),
-        np.asarray(c.substep, dtype=i32),
-        np.asarray(c.a, dtype=i32),
-        np.asarray(c.b, dtype=i32),
-        np.asarray(c.feature, dtype=i32),
-        np.asarray(c.slot, dtype=i32),
-        c.point,
-        c.normal,
-        c.depth,
-        c.pair_depth,
-        c.push_a,
-        c.push_b,
-        c.impulse,
-        c.tangent_impulse,
-        c.restitution,
-        model.mass,
-        model.inertia,
-        model.concrete,
-        *gravity,
+        state,
+        rows,
+        masses,
+        gravity,
     )
     if bad >= 0:
         if bad == NOT_MANIFOLDS:
             from recorder.mcap_writer import manifold_starts
 
-            manifold_starts(c)  # raises ValueError naming the row
+            manifold_starts(record.contacts)  # raises ValueError naming the row
         return False
     assert (bodies_len, contacts_len) == (bodies_size, contacts_size)
     if stats is not None:
@@ -386,14 +367,11 @@ def pack_batch(buf, pos: int, lo: int, hi: int, batch, sizes, model, gravity) ->
     ``buf`` (uint8), by one compiled call (`recorder.pack.pack_frames`, with the /stats sums).
     sizes: `batch_frame_sizes`; model: ``mass``, ``inertia``, ``concrete`` arrays; gravity:
     (gx, gy) m/s^2. Returns the first step holding a NaN or an infinity, or hi."""
-    from recorder.pack import pack_frames
+    from recorder.pack import batch_state, model_bundle, pack_frames
 
     return pack_frames(
-        buf, pos, lo, hi, batch.first, batch.dt, sizes, batch.offsets, batch.position,
-        batch.angle, batch.velocity, batch.angular_velocity, batch.exists, *batch.row_arrays,
-        np.ascontiguousarray(model.mass, dtype=np.float64),
-        np.ascontiguousarray(model.inertia, dtype=np.float64),
-        np.ascontiguousarray(model.concrete, dtype=bool), *gravity,
+        buf, pos, lo, hi, batch.first, batch.dt, sizes, batch.offsets, batch_state(batch),
+        tuple(batch.row_arrays), model_bundle(model), tuple(gravity),
     )  # fmt: skip
 
 

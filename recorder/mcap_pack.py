@@ -43,11 +43,15 @@ from recorder.pack import (
     _head,
     _manifolds_ok,
     _varint,
+    batch_state,
     copy_bytes,
     manifold_counts,
     message_sizes,
+    model_bundle,
     pack_messages,
     put_double,
+    row_range,
+    step_state,
     varint_size,
 )
 
@@ -295,7 +299,7 @@ def _joints_finite(j0, j1, j2, j3, j4, j5, j6, j7):
 @numba.njit(cache=True, nogil=True)
 def pack_records(
     buf, pos, lo, hi, first, dt, log_times, channels, world, world_at, state, offsets, rows,
-    joints, mass, inertia, concrete, gx, gy, sha256, hash_at,
+    joints, model, gravity, sha256, hash_at,
 ):  # fmt: skip
     """Steps lo .. hi - 1 of a batch as Message records laid end to end from byte ``pos`` of
     ``buf`` (uint8): per step its `/world` record when the caller has one (``world[world_at[s]
@@ -307,8 +311,9 @@ def pack_records(
     `isaac.engine.records.StepBatch.record` computes it. channels: (bodies, contacts, joints,
     stats) channel ids; state: the batch's (position, angle, velocity, angular_velocity,
     exists); offsets: its row offsets; rows: its row arrays (CONTACT_FIELDS order); joints: its
-    eight (steps, m, ...) joint arrays (JOINT_FIELDS order; m = 0 without joints); mass,
-    inertia, concrete: the model's, gx, gy: gravity (m/s^2), for the /stats sums; sha256:
+    eight (steps, m, ...) joint arrays (JOINT_FIELDS order; m = 0 without joints); model:
+    (mass, inertia, concrete), gravity: (gx, gy) m/s^2, for the /stats sums (`recorder.pack`'s
+    bundles); sha256:
     `hash_function` (0: the hashes are left for `fill_hashes`). hash_at (out): where each
     step's 64 hash digits go.
 
@@ -347,11 +352,8 @@ def pack_records(
         bodies_at = _record_head(buf, at, ch_bodies, step, log_time, bodies_len)
         _record_head(buf, bodies_at + bodies_len, ch_contacts, step, log_time, contacts_len)
         bad, _, _, _, sums = pack_messages(
-            buf, bodies_at, bodies_len + RECORD_HEAD, step, time, n, m, position[s], angle[s],
-            velocity[s], angular_velocity[s], exists[s], substep[r0:r1], a[r0:r1], b[r0:r1],
-            feature[r0:r1], slot[r0:r1], point[r0:r1], normal[r0:r1], depth[r0:r1],
-            pair_depth[r0:r1], push_a[r0:r1], push_b[r0:r1], impulse[r0:r1],
-            tangent_impulse[r0:r1], restitution[r0:r1], mass, inertia, concrete, gx, gy,
+            buf, bodies_at, bodies_len + RECORD_HEAD, step, time, n, m, step_state(state, s),
+            row_range(rows, r0, r1), model, gravity,
         )  # fmt: skip
         if bad >= 0:
             return s, start, bad
@@ -465,9 +467,7 @@ class BatchPacker:
     ) -> None:
         self.model = model
         self.encode_world = encode_world
-        self.mass = np.ascontiguousarray(model.mass, dtype=np.float64)
-        self.inertia = np.ascontiguousarray(model.inertia, dtype=np.float64)
-        self.concrete = np.ascontiguousarray(model.concrete, dtype=bool)
+        self.masses = model_bundle(model)  # (mass, inertia, concrete), for the /stats sums
         self.gravity = tuple(float(g) for g in gravity)
         self.clock = LogClock(dt)
         self.clock_dt = float(dt)
@@ -519,7 +519,7 @@ class BatchPacker:
         done, end, why = pack_records(
             buf, pos, lo, hi, batch.first, batch.dt, plan.log_times,
             (c.bodies, c.contacts, c.joints, c.stats), plan.world, plan.world_at, state,
-            offsets, rows, joints, self.mass, self.inertia, self.concrete, *self.gravity,
+            offsets, rows, joints, self.masses, self.gravity,
             self.sha256, hash_at,
         )  # fmt: skip
         if self.sha256 == 0 and self.hashes:
@@ -655,9 +655,8 @@ def first_unfit(lo, hi, state, offsets, rows, joints):
 def batch_arguments(batch) -> tuple:
     """(state, offsets, rows, joints) of a batch as `pack_records` and `first_unfit` take them."""
     joints = batch._joints
-    state = (batch.position, batch.angle, batch.velocity, batch.angular_velocity, batch.exists)
     return (
-        state,
+        batch_state(batch),
         batch.offsets,
         batch.row_arrays,
         tuple(_no_joints(batch.steps) if joints is None else joints),

@@ -43,6 +43,78 @@ CONTACT_NUMBERS = np.array([16, 17, 18, 19, 20, 21, 22, 25, 23, 24, 8, 10, 13, 1
 CONTACT_UNIT_BYTES = np.array([4, 4, 4, 4, 4, 16, 8, 4, 16, 16, 16, 8, 8, 8, 8])
 CONTACT_PER = np.array([K, K, K, K, K, K, K, P, P, P, M, M, M, M, M])
 
+# The kernels take a step's arrays as named bundles (plain tuples, which numba types as
+# tuples): state = (position (n, 2) m, angle (n,) rad, velocity (n, 2) m/s, angular_velocity
+# (n,) rad/s, exists (n,) bool), BODY_FIELDS order; rows = the contact rows' arrays in
+# CONTACT_FIELDS order (substep, a, b, feature, slot int32; point, normal, depth, pair_depth,
+# push_a, push_b, impulse, tangent_impulse, restitution float64); model = (mass kg, inertia
+# kg m^2 float64, concrete bool); gravity = (gx, gy) m/s^2. A batch's bundles hold (S, ...)
+# state arrays and all its rows (`step_state`, `row_range` pick one step's).
+
+
+def record_bundles(record) -> tuple[tuple, tuple]:
+    """A record's (state, rows) bundles for the compiled packers (`recorder.pack`: BODY_FIELDS
+    and CONTACT_FIELDS order; exists as bool, the indices as int32)."""
+    c = record.contacts
+    i32 = np.int32
+    state = (
+        record.position,
+        record.angle,
+        record.velocity,
+        record.angular_velocity,
+        np.asarray(record.exists, dtype=bool),
+    )
+    rows = (
+        np.asarray(c.substep, dtype=i32),
+        np.asarray(c.a, dtype=i32),
+        np.asarray(c.b, dtype=i32),
+        np.asarray(c.feature, dtype=i32),
+        np.asarray(c.slot, dtype=i32),
+        c.point,
+        c.normal,
+        c.depth,
+        c.pair_depth,
+        c.push_a,
+        c.push_b,
+        c.impulse,
+        c.tangent_impulse,
+        c.restitution,
+    )
+    return state, rows
+
+
+def batch_state(batch) -> tuple:
+    """A `StepBatch`'s (S, n, ...) state bundle (`recorder.pack`)."""
+    return batch.position, batch.angle, batch.velocity, batch.angular_velocity, batch.exists
+
+
+def model_bundle(model) -> tuple:
+    """(mass kg, inertia kg m^2, concrete) of ``model`` as the compiled packers take them."""
+    return (
+        np.ascontiguousarray(model.mass, dtype=np.float64),
+        np.ascontiguousarray(model.inertia, dtype=np.float64),
+        np.ascontiguousarray(model.concrete, dtype=bool),
+    )
+
+
+@numba.njit(cache=True, nogil=True)
+def step_state(state, s):
+    """Step s's state bundle of a batch's (S, n, ...) one."""
+    position, angle, velocity, angular_velocity, exists = state
+    return position[s], angle[s], velocity[s], angular_velocity[s], exists[s]
+
+
+@numba.njit(cache=True, nogil=True)
+def row_range(rows, r0, r1):
+    """The rows bundle of rows r0 .. r1 - 1 (one step's, in a batch)."""
+    (substep, a, b, feature, slot, point, normal, depth, pair_depth, push_a, push_b, impulse,
+     tangent_impulse, restitution) = rows  # fmt: skip
+    return (
+        substep[r0:r1], a[r0:r1], b[r0:r1], feature[r0:r1], slot[r0:r1], point[r0:r1],
+        normal[r0:r1], depth[r0:r1], pair_depth[r0:r1], push_a[r0:r1], push_b[r0:r1],
+        impulse[r0:r1], tangent_impulse[r0:r1], restitution[r0:r1],
+    )  # fmt: skip
+
 
 @numba.njit(cache=True, nogil=True)
 def varint_size(value: int) -> int:
@@ -165,11 +237,13 @@ def _finite(src):
 
 
 @numba.njit(cache=True, nogil=True)
-def _stat_sums(
-    mass, inertia, concrete, exists, position, velocity, angular_velocity, depth, impulse, gx, gy
-):
+def _stat_sums(model, gravity, state, depth, impulse):
     """(kinetic, potential energy, linear momentum x, y, angular momentum, max depth, max
-    impulse) of a step, as `recorder.stats.compute_stats` has them."""
+    impulse) of a step (bundles as above; depth, impulse: its rows'), as
+    `recorder.stats.compute_stats` has them."""
+    mass, inertia, concrete = model
+    gx, gy = gravity
+    position, _, velocity, angular_velocity, exists = state
     ke, pe, px, py, ang = _sums(
         mass, inertia, concrete, exists, position, velocity, angular_velocity, gx, gy
     )
@@ -203,39 +277,10 @@ def _write_head(words, ints, base, step, time, n, m, sums):
 
 
 @numba.njit(cache=True, nogil=True)
-def pack_layout(
-    buf,
-    base,
-    step,
-    time,
-    n,
-    m,
-    k,
-    p,
-    contacts_at,
-    position,
-    angle,
-    velocity,
-    angular_velocity,
-    exists,
-    point,
-    normal,
-    depth,
-    pair_depth,
-    push_a,
-    push_b,
-    impulse,
-    tangent_impulse,
-    restitution,
-    mass,
-    inertia,
-    concrete,
-    gx,
-    gy,
-):
+def pack_layout(buf, base, step, time, n, m, k, p, contacts_at, state, rows, model, gravity):
     """Write the tags and lengths of Bodies at ``buf[base:]`` and of Contacts (format 2) at
     ``buf[base + contacts_at:]`` for n bodies and m contact points in k manifolds, p of them
-    pushed.
+    pushed (the step's bundles: see the top of this module).
 
     Returns (bad, offsets, bodies bytes, contacts bytes, stats): offsets (20,) = where each
     field's values go, the 5 of BODY_FIELDS then the 14 of the Contacts message in its order
@@ -255,6 +300,9 @@ def pack_layout(
         count = _count(CONTACT_PER[j], m, k, p)
         at = _field(buf, at, CONTACT_NUMBERS[j], count * CONTACT_UNIT_BYTES[j], offsets, 5 + j)
     contacts_len = at - start
+    position, angle, velocity, angular_velocity, _ = state
+    (_, _, _, _, _, point, normal, depth, pair_depth, push_a, push_b, impulse, tangent_impulse,
+     restitution) = rows  # fmt: skip
     bad = -1
     if not _finite(position):
         bad = 0
@@ -282,25 +330,7 @@ def pack_layout(
         bad = 17
     if bad < 0 and not _finite(restitution):
         bad = 18
-    return (
-        bad,
-        offsets,
-        bodies_len,
-        contacts_len,
-        _stat_sums(
-            mass,
-            inertia,
-            concrete,
-            exists,
-            position,
-            velocity,
-            angular_velocity,
-            depth,
-            impulse,
-            gx,
-            gy,
-        ),
-    )
+    return bad, offsets, bodies_len, contacts_len, _stat_sums(model, gravity, state, depth, impulse)
 
 
 def copy_bytes(dst, at, src):
@@ -444,39 +474,7 @@ def _int32s(buf, at, count):
 
 
 @numba.njit(cache=True, nogil=True)
-def pack_messages(
-    buf,
-    bodies_at,
-    contacts_at,
-    step,
-    time,
-    n,
-    m,
-    position,
-    angle,
-    velocity,
-    angular_velocity,
-    exists,
-    substep,
-    a,
-    b,
-    feature,
-    slot,
-    point,
-    normal,
-    depth,
-    pair_depth,
-    push_a,
-    push_b,
-    impulse,
-    tangent_impulse,
-    restitution,
-    mass,
-    inertia,
-    concrete,
-    gx,
-    gy,
-):
+def pack_messages(buf, bodies_at, contacts_at, step, time, n, m, state, rows, model, gravity):
     """The Bodies message at byte ``bodies_at`` of ``buf`` (uint8) and the Contacts message
     (format 2: the manifold fields from each manifold's first row, slot 0; the rows must be
     manifolds as `recorder.mcap_writer.manifold_starts` checks) ``contacts_at`` bytes after
@@ -487,36 +485,12 @@ def pack_messages(
     first float field holding a NaN or an infinity, or NOT_MANIFOLDS (nothing then is fit to
     send); offsets and stats as `pack_layout` gives them.
     """
+    position, angle, velocity, angular_velocity, exists = state
+    (substep, a, b, feature, slot, point, normal, depth, pair_depth, push_a, push_b, impulse,
+     tangent_impulse, restitution) = rows  # fmt: skip
     k, p = manifold_counts(slot, push_a, push_b)
     bad, offsets, bodies_len, contacts_len, sums = pack_layout(
-        buf,
-        bodies_at,
-        step,
-        time,
-        n,
-        m,
-        k,
-        p,
-        contacts_at,
-        position,
-        angle,
-        velocity,
-        angular_velocity,
-        exists,
-        point,
-        normal,
-        depth,
-        pair_depth,
-        push_a,
-        push_b,
-        impulse,
-        tangent_impulse,
-        restitution,
-        mass,
-        inertia,
-        concrete,
-        gx,
-        gy,
+        buf, bodies_at, step, time, n, m, k, p, contacts_at, state, rows, model, gravity
     )
     if bad >= 0:
         return bad, bodies_len, contacts_len, offsets, sums
@@ -560,39 +534,7 @@ def pack_messages(
 
 
 @numba.njit(cache=True, nogil=True)
-def pack_frame(
-    buf,
-    pos,
-    step,
-    time,
-    n,
-    m,
-    contacts_at,
-    position,
-    angle,
-    velocity,
-    angular_velocity,
-    exists,
-    substep,
-    a,
-    b,
-    feature,
-    slot,
-    point,
-    normal,
-    depth,
-    pair_depth,
-    push_a,
-    push_b,
-    impulse,
-    tangent_impulse,
-    restitution,
-    mass,
-    inertia,
-    concrete,
-    gx,
-    gy,
-):
+def pack_frame(buf, pos, step, time, n, m, contacts_at, state, rows, model, gravity):
     """A whole MCAP frame at byte ``pos`` (a multiple of 8) of ``buf`` (uint8): the head
     (frames.FRAME_HEAD, native = little-endian: step, time s, n, m, the nine /stats values,
     the two messages' lengths), the Bodies message at ``pos + HEAD_BYTES`` and the Contacts
@@ -602,37 +544,7 @@ def pack_frame(
     holding a NaN or an infinity, or NOT_MANIFOLDS (nothing then is fit to send).
     """
     bad, bodies_len, contacts_len, _, sums = pack_messages(
-        buf,
-        pos + HEAD_BYTES,
-        contacts_at,
-        step,
-        time,
-        n,
-        m,
-        position,
-        angle,
-        velocity,
-        angular_velocity,
-        exists,
-        substep,
-        a,
-        b,
-        feature,
-        slot,
-        point,
-        normal,
-        depth,
-        pair_depth,
-        push_a,
-        push_b,
-        impulse,
-        tangent_impulse,
-        restitution,
-        mass,
-        inertia,
-        concrete,
-        gx,
-        gy,
+        buf, pos + HEAD_BYTES, contacts_at, step, time, n, m, state, rows, model, gravity
     )
     if bad >= 0:
         return bad, bodies_len, contacts_len
@@ -708,31 +620,7 @@ def _first(bad, k):
 
 
 @numba.njit(cache=True, nogil=True)
-def pack_rerun(
-    buf,
-    at,
-    step,
-    time,
-    position,
-    angle,
-    exists,
-    velocity,
-    angular_velocity,
-    point,
-    normal,
-    depth,
-    pair_depth,
-    push_a,
-    push_b,
-    impulse,
-    tangent_impulse,
-    restitution,
-    mass,
-    inertia,
-    concrete,
-    gx,
-    gy,
-):
+def pack_rerun(buf, at, step, time, state, rows, model, gravity):
     """Write a step's Rerun frame (layout above) at byte ``at`` (a multiple of 8) of ``buf``
     (uint8, a multiple of 8 bytes long), check every float of the record and sum the `/stats`
     values as `pack_layout` does.
@@ -742,6 +630,9 @@ def pack_rerun(
     (velocities, depths, tangent impulse, restitution) are checked all the same: the recorder's
     never-write-NaN check is this pass when the Rerun writer is the only one.
     """
+    position, angle, velocity, angular_velocity, exists = state
+    (_, _, _, _, _, point, normal, depth, pair_depth, push_a, push_b, impulse, tangent_impulse,
+     restitution) = rows  # fmt: skip
     words = buf.view(np.float64)
     ints = buf.view(np.int64)
     n = angle.shape[0]
@@ -779,28 +670,8 @@ def pack_rerun(
         bad = _first(bad, 17)
     if not _finite(restitution):
         bad = _first(bad, 18)
-    _write_head(
-        words,
-        ints,
-        base,
-        step,
-        time,
-        n,
-        m,
-        _stat_sums(
-            mass,
-            inertia,
-            concrete,
-            exists,
-            position,
-            velocity,
-            angular_velocity,
-            depth,
-            impulse,
-            gx,
-            gy,
-        ),
-    )
+    sums = _stat_sums(model, gravity, state, depth, impulse)
+    _write_head(words, ints, base, step, time, n, m, sums)
     return bad
 
 
@@ -824,28 +695,21 @@ def frame_sizes_of(first, n, offsets, slot, push_a, push_b, head_bytes):
 
 
 @numba.njit(cache=True, nogil=True)
-def pack_frames(
-    buf, pos, lo, hi, first, dt, sizes, offsets, position, angle, velocity, angular_velocity,
-    exists, substep, a, b, feature, slot, point, normal, depth, pair_depth, push_a, push_b,
-    impulse, tangent_impulse, restitution, mass, inertia, concrete, gx, gy,
-):  # fmt: skip
+def pack_frames(buf, pos, lo, hi, first, dt, sizes, offsets, state, rows, model, gravity):
     """Steps lo .. hi - 1 of a batch (the arrays of `isaac.engine.driver.Batch`; step s is
     state index first + s at time (first + s) * dt s, as `StepBatch.record` computes it) as
     consecutive `pack_frame` frames from byte `pos` of `buf`, frame sizes from
     `frame_sizes_of`. Returns the first step holding a NaN or an infinity or rows that are not
     manifolds (its frame and the ones after it unwritten), or hi."""
-    n = angle.shape[1]
+    n = state[1].shape[1]
     at = pos
     for s in range(lo, hi):
         r0 = offsets[s]
         r1 = offsets[s + 1]
         step = first + s
         bad, _, _ = pack_frame(
-            buf, at, step, step * dt, n, r1 - r0, (sizes[s, 0] + 7) & ~7, position[s], angle[s],
-            velocity[s], angular_velocity[s], exists[s], substep[r0:r1], a[r0:r1], b[r0:r1],
-            feature[r0:r1], slot[r0:r1], point[r0:r1], normal[r0:r1], depth[r0:r1],
-            pair_depth[r0:r1], push_a[r0:r1], push_b[r0:r1], impulse[r0:r1],
-            tangent_impulse[r0:r1], restitution[r0:r1], mass, inertia, concrete, gx, gy,
+            buf, at, step, step * dt, n, r1 - r0, (sizes[s, 0] + 7) & ~7, step_state(state, s),
+            row_range(rows, r0, r1), model, gravity,
         )  # fmt: skip
         if bad >= 0:
             return s

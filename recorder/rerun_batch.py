@@ -28,8 +28,8 @@ from typing import NamedTuple
 import numba
 import numpy as np
 
-from isaac.engine.diagnostics import _sums
 from recorder import kernel_cache  # noqa: F401  (first: keys the kernels' numba cache)
+from recorder.pack import _stat_sums, step_state
 
 # the columns of Buffers.per_step and the cursors of Buffers.at
 STRIPS, ROWS, PUSHES, JOINTS = 0, 1, 2, 3  # per_step: strips, contact rows, push arrows, joints
@@ -216,20 +216,19 @@ def _finite_values(src, lo, hi):
 
 
 @numba.njit(cache=True, nogil=True)
-def batch_stats(
-    mass, inertia, concrete, gx, gy, position, angle, velocity, angular_velocity, exists,
-    offsets, point, normal, depth, pair_depth, push_a, push_b, impulse, tangent_impulse,
-    restitution, out,
-):  # fmt: skip
+def batch_stats(model, gravity, state, offsets, rows, out):
     """Each step's nine `/stats` values (recorder.rerun_writer.STAT_NAMES order, as
     `recorder.stats.compute_stats` has them, the same kernel for the sums) into out (S, 9),
     checking every float of the step on the way. Returns the first step holding a NaN or an
     infinity (its stats and those after it not written), or S.
 
-    Arrays as in `isaac.engine.records.StepBatch`: the state (S, n, ...) after each step, the
-    contact rows of step s at rows offsets[s] .. offsets[s + 1]; model: mass (kg), inertia
-    (kg m^2), concrete; gravity (gx, gy) m/s^2.
+    A `isaac.engine.records.StepBatch`'s bundles (`recorder.pack`): state, the (S, n, ...)
+    arrays after each step; rows, the contact rows, step s's at offsets[s] .. offsets[s + 1];
+    model (mass kg, inertia kg m^2, concrete); gravity (gx, gy) m/s^2.
     """
+    position, angle, velocity, angular_velocity, _ = state
+    (_, _, _, _, _, point, normal, depth, pair_depth, push_a, push_b, impulse, tangent_impulse,
+     restitution) = rows  # fmt: skip
     steps = angle.shape[0]
     for s in range(steps):
         lo = offsets[s]
@@ -244,15 +243,9 @@ def batch_stats(
         ok = ok and _finite_values(restitution, lo, hi)
         if not ok:
             return s
-        ke, pe, px, py, ang = _sums(
-            mass, inertia, concrete, exists[s], position[s], velocity[s], angular_velocity[s],
-            gx, gy,
-        )  # fmt: skip
-        max_depth = depth[lo] if hi > lo else 0.0
-        max_impulse = impulse[lo] if hi > lo else 0.0
-        for i in range(lo + 1, hi):
-            max_depth = max(max_depth, depth[i])
-            max_impulse = max(max_impulse, impulse[i])
+        ke, pe, px, py, ang, max_depth, max_impulse = _stat_sums(
+            model, gravity, step_state(state, s), depth[lo:hi], impulse[lo:hi]
+        )
         out[s, 0] = ke
         out[s, 1] = pe
         out[s, 2] = ke + pe

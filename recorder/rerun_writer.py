@@ -36,6 +36,7 @@ import rerun as rr
 from isaac.engine.records import CONTACT_FIELDS, StepRecord
 from isaac.errors import LogError
 from recorder import blueprint
+from recorder.pack import batch_state, model_bundle
 from recorder.rerun_batch import (
     AT_JOINTS,
     AT_POINTS,
@@ -258,10 +259,7 @@ class RerunLogWriter:
             joint_a, joint_b, local_a, local_b,
             np.array([self.normal_length, self.impulse_scale, self.push_scale]),
         )  # fmt: skip
-        self._stats_model = tuple(
-            np.ascontiguousarray(getattr(model, k), dtype=t)
-            for k, t in (("mass", np.float64), ("inertia", np.float64), ("concrete", bool))
-        )
+        self._stats_model = model_bundle(model)  # (mass, inertia, concrete)
         self._summary = _RunSummary()
         self._closed = False
         self._sent_last: int | None = None  # the last step of the batches sent
@@ -606,10 +604,8 @@ class RerunLogWriter:
         rows = dict(zip(CONTACT_FIELDS, batch.row_arrays))
         stats = np.empty((batch.steps, len(STAT_NAMES)))
         good = batch_stats(
-            *self._stats_model, *self.gravity, batch.position, batch.angle, batch.velocity,
-            batch.angular_velocity, batch.exists, batch.offsets, rows["point"], rows["normal"],
-            rows["depth"], rows["pair_depth"], rows["push_a"], rows["push_b"], rows["impulse"],
-            rows["tangent_impulse"], rows["restitution"], stats,
+            self._stats_model, self.gravity, batch_state(batch), batch.offsets,
+            tuple(batch.row_arrays), stats,
         )  # fmt: skip
         if good and not self._static_done:
             self._log_static(batch.angle[0], batch.position[0], batch.exists[0])

@@ -78,6 +78,7 @@ from recorder.frames import (
     put_trailer,
     read_rerun_frame,
 )
+from recorder.pack import model_bundle
 from recorder.spawn import WriterChild, start_writer_child
 
 # shared memory per writer, in frames of the scene's size, within RING_MIN..RING_MAX bytes,
@@ -281,12 +282,14 @@ class WriterProcess:
             concrete=np.ascontiguousarray(model["concrete"], dtype=bool),
         )
         self._gravity = tuple(float(g) for g in config["gravity"])
+        self._masses = model_bundle(self._stats_model)  # (mass, inertia, concrete), compiled
         # the compiled encoder writes the host's byte order: little-endian only
         self._compiled = sys.byteorder == "little"
         if kind == "rerun":  # native byte order: both ends are on this machine
-            from recorder.pack import pack_rerun, rerun_offsets
+            from recorder.pack import pack_rerun, record_bundles, rerun_offsets
 
             self._pack_rerun, self._rerun_offsets = pack_rerun, rerun_offsets
+            self._record_bundles = record_bundles
         # MCAP without the Foxglove channel (drawn from records in the child): every step goes
         # as Message records packed here (recorder.mcap_pack), which the child enters into its
         # chunks a stretch at a time; /world is encoded here too, when existence changes
@@ -456,33 +459,18 @@ class WriterProcess:
             buf, pos = np.empty(size, dtype=np.uint8), 0
         else:
             (pos, end), buf = self._reserve(size), self._ring_u8
-        c = record.contacts
-        model = self._stats_model
+        state, rows = self._record_bundles(record)
         if (
             self._pack_rerun(
                 buf,
                 pos,
                 int(record.step),
                 float(record.time),
-                record.position,
-                record.angle,
-                record.exists,
-                record.velocity,
-                record.angular_velocity,
-                c.point,
-                c.normal,
-                c.depth,
-                c.pair_depth,
-                c.push_a,
-                c.push_b,
-                c.impulse,
-                c.tangent_impulse,
-                c.restitution,
-                model.mass,
-                model.inertia,
-                model.concrete,
-                *self._gravity,
-            )
+                state,
+                rows,
+                self._masses,
+                self._gravity,
+            )  # fmt: skip
             >= 0
         ):
             return False
@@ -532,7 +520,7 @@ class WriterProcess:
             self._ring_u8,
             pos,
             record,
-            self._stats_model,
+            self._masses,
             self._gravity,
             stats,
             None if bodies_size is None else (bodies_size, contacts_size),

@@ -18,6 +18,7 @@ from isaac.errors import LogError, SimulationError
 from recorder import Recorder
 from recorder import frames as F
 from recorder import writer_process as W
+from recorder.pack import model_bundle
 from recorder.reader import LogReader
 from recorder.stats import compute_stats
 
@@ -63,6 +64,7 @@ def _packer(ring, sim):
         concrete=np.asarray(sim.model.concrete, dtype=bool),
     )
     proc._gravity = (0.0, -9.81)
+    proc._masses = model_bundle(proc._stats_model)
     return proc
 
 
@@ -101,13 +103,21 @@ def test_the_compiled_encoder_writes_the_reference_encoders_bytes_and_stats():
 )
 @pytest.mark.parametrize("bad", [np.nan, np.inf])
 def test_the_compiled_encoder_refuses_a_nan_or_infinity_in_any_float_field(field, bad):
-    from recorder.pack import BODY_FIELDS, CONTACT_FIELDS, manifold_counts, pack_layout
+    from recorder.pack import (
+        BODY_FIELDS,
+        CONTACT_FIELDS,
+        manifold_counts,
+        model_bundle,
+        pack_layout,
+        record_bundles,
+    )
 
     sim, records = _records(steps=3)
     r = _with_value(records[-1], field, bad)
     ring = np.zeros(1 << 20, dtype=np.uint8)
     assert not _packer(ring, sim)._compiled_pack(0, r, None)
     c = r.contacts
+    state, rows = record_bundles(r)
     bad_field = pack_layout(
         ring,
         64,
@@ -117,37 +127,23 @@ def test_the_compiled_encoder_refuses_a_nan_or_infinity_in_any_float_field(field
         len(c),
         *manifold_counts(c.slot, c.push_a, c.push_b),
         4096,
-        r.position,
-        r.angle,
-        r.velocity,
-        r.angular_velocity,
-        r.exists,
-        c.point,
-        c.normal,
-        c.depth,
-        c.pair_depth,
-        c.push_a,
-        c.push_b,
-        c.impulse,
-        c.tangent_impulse,
-        c.restitution,
-        np.asarray(sim.model.mass, dtype=float),
-        np.asarray(sim.model.inertia, dtype=float),
-        np.asarray(sim.model.concrete, dtype=bool),
-        0.0,
-        -9.81,
+        state,
+        rows,
+        model_bundle(sim.model),
+        (0.0, -9.81),
     )[0]
     assert bad_field == (BODY_FIELDS + CONTACT_FIELDS).index(field)
 
 
 def _rerun_packer(ring, sim):
     """A Rerun WriterProcess's packing half, without a child."""
-    from recorder.pack import pack_rerun, rerun_offsets
+    from recorder.pack import pack_rerun, record_bundles, rerun_offsets
 
     proc = _packer(ring, sim)
     proc.kind, proc.capacity, proc.head, proc.released = "rerun", ring.size, 0, 0
     proc._pending = bytearray()
     proc._pack_rerun, proc._rerun_offsets = pack_rerun, rerun_offsets
+    proc._record_bundles = record_bundles
     return proc
 
 
@@ -155,7 +151,7 @@ _RERUN_FIELDS = ("position", "angle", "exists", "point", "normal", "impulse", "p
 
 
 def test_the_rerun_frame_round_trips_every_field_bit_for_bit():
-    from recorder.pack import pack_rerun
+    from recorder.pack import model_bundle, pack_rerun, record_bundles
 
     sim, records = _records(n=13, steps=30, leave_at=20)  # 13: exists bytes end mid-word
     assert len(records[0].contacts) == 0  # step 0: no contact arrays
@@ -164,37 +160,11 @@ def test_the_rerun_frame_round_trips_every_field_bit_for_bit():
     position[2] = (-0.0, 5e-324)  # the sign of zero and a subnormal survive
     records[7] = dataclasses.replace(r, position=position)
     ring = np.full(1 << 16, 0xAB, dtype=np.uint8)  # leftover bytes must not leak into values
-    model = _packer(ring, sim)._stats_model
+    model = model_bundle(_packer(ring, sim)._stats_model)
     for r in records:
         c = r.contacts
-        assert (
-            pack_rerun(
-                ring,
-                24,
-                r.step,
-                r.time,
-                r.position,
-                r.angle,
-                r.exists,
-                r.velocity,
-                r.angular_velocity,
-                c.point,
-                c.normal,
-                c.depth,
-                c.pair_depth,
-                c.push_a,
-                c.push_b,
-                c.impulse,
-                c.tangent_impulse,
-                c.restitution,
-                model.mass,
-                model.inertia,
-                model.concrete,
-                0.0,
-                -9.81,
-            )
-            == -1
-        )
+        state, rows = record_bundles(r)
+        assert pack_rerun(ring, 24, r.step, r.time, state, rows, model, (0.0, -9.81)) == -1
         frame = F.read_rerun_frame(ring, 24)
         assert (frame.step, frame.time) == (r.step, r.time)
         for name in _RERUN_FIELDS:
@@ -227,7 +197,7 @@ _FLOAT_FIELDS = (
 @pytest.mark.parametrize("field", _FLOAT_FIELDS)
 @pytest.mark.parametrize("bad", [np.nan, np.inf, -np.inf])
 def test_the_rerun_frame_refuses_a_nan_or_infinity_in_any_float_field(field, bad):
-    from recorder.pack import BODY_FIELDS, CONTACT_FIELDS
+    from recorder.pack import BODY_FIELDS, CONTACT_FIELDS, record_bundles
 
     sim, records = _records(steps=3)
     r = _with_value(records[-1], field, bad)
@@ -237,33 +207,8 @@ def test_the_rerun_frame_refuses_a_nan_or_infinity_in_any_float_field(field, bad
     head, pending = proc.head, bytes(proc._pending)
     assert proc.write(r) is False  # ... a bad one is not: nothing more announced
     assert (proc.head, bytes(proc._pending)) == (head, pending)
-    c = r.contacts
-    model = proc._stats_model
-    got = proc._pack_rerun(
-        ring,
-        0,
-        r.step,
-        r.time,
-        r.position,
-        r.angle,
-        r.exists,
-        r.velocity,
-        r.angular_velocity,
-        c.point,
-        c.normal,
-        c.depth,
-        c.pair_depth,
-        c.push_a,
-        c.push_b,
-        c.impulse,
-        c.tangent_impulse,
-        c.restitution,
-        model.mass,
-        model.inertia,
-        model.concrete,
-        0.0,
-        -9.81,
-    )
+    state, rows = record_bundles(r)
+    got = proc._pack_rerun(ring, 0, r.step, r.time, state, rows, proc._masses, (0.0, -9.81))
     assert got == (BODY_FIELDS + CONTACT_FIELDS).index(field)
 
 
