@@ -227,7 +227,7 @@ def pack_into(
         state,
         rows,
         masses,
-        gravity,
+        (float(gravity[0]), float(gravity[1])),
     )
     if bad >= 0:
         if bad == NOT_MANIFOLDS:
@@ -371,7 +371,7 @@ def pack_batch(buf, pos: int, lo: int, hi: int, batch, sizes, model, gravity) ->
 
     return pack_frames(
         buf, pos, lo, hi, batch.first, batch.dt, sizes, batch.offsets, batch_state(batch),
-        tuple(batch.row_arrays), model_bundle(model), tuple(gravity),
+        tuple(batch.row_arrays), model_bundle(model), (float(gravity[0]), float(gravity[1])),
     )  # fmt: skip
 
 

@@ -304,7 +304,7 @@ class StepEncoder:
     recorder writes for it.
 
     On little-endian machines one compiled call encodes the step into a reused buffer (the
-    writer processes' `recorder.writer_process.pack_into`, tested byte for byte against the
+    writer processes' `recorder.frames.pack_into`, tested byte for byte against the
     reference encoders; about 20 us on the 500-body pile against 70 us for `encode_bodies`,
     `encode_contacts` and `compute_stats`); elsewhere, and for a record holding a NaN or an
     infinity (which the compiled path refuses), the reference encoders. For a log of format 1
@@ -313,15 +313,11 @@ class StepEncoder:
     """
 
     def __init__(self, model, gravity: tuple[float, float], contacts_format: str = "2") -> None:
-        from types import SimpleNamespace
+        from recorder.pack import model_bundle
 
         self.model = model
-        self.gravity = gravity
-        self._sums_model = SimpleNamespace(
-            mass=np.ascontiguousarray(model.mass, dtype=np.float64),
-            inertia=np.ascontiguousarray(model.inertia, dtype=np.float64),
-            concrete=np.ascontiguousarray(model.concrete, dtype=bool),
-        )
+        self.gravity = tuple(float(g) for g in gravity)
+        self._masses = model_bundle(model)  # (mass, inertia, concrete) for the /stats sums
         self._compiled = sys.byteorder == "little"
         self._buf = np.zeros(0, dtype=np.uint8)
         self._v1 = contacts_format == "1"
@@ -341,7 +337,7 @@ class StepEncoder:
             size = frame_size(record)
             if self._buf.size < size:
                 self._buf = np.zeros(max(size, 2 * self._buf.size), dtype=np.uint8)
-            if pack_into(self._buf, 0, record, self._sums_model, self.gravity):
+            if pack_into(self._buf, 0, record, self._masses, self.gravity):
                 frame = Frame(self._buf[:size])
                 stats = {**frame.stats, "state_hash": frame.state_hash()}
                 # bytes, not views of the buffer: the next step overwrites it, and
