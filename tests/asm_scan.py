@@ -82,6 +82,26 @@ def _exercise() -> None:
     from isaac.engine.diagnostics import all_finite
 
     all_finite(record)
+    # what a writer process does with the records its parent packed without their state
+    # hashes (`put_hashes`): here, and before any writer process runs, which would compile it
+    # into the shared cache, and this process would load it from there (uninspectable)
+    import numpy as np
+
+    from recorder.mcap_pack import BatchPacker, put_hashes
+    from recorder.mcap_writer import encode_world, record_channels
+
+    sim = Simulation(scenes[1], compile_ahead=False)
+    batch = next(sim.batches(4, size=4))
+    channels = record_channels(False)
+    gravity = tuple(float(g) for g in scenes[1].world.gravity)
+    packer = BatchPacker(
+        sim.model, gravity, scenes[1].world.dt, channels, (), encode_world=encode_world,
+        hashes=False,
+    )  # fmt: skip
+    plan = packer.plan(batch, None)
+    buf = np.zeros(int(plan.sizes.sum()), dtype=np.uint8)
+    _, end, _ = packer.pack(buf, 0, 0, batch.steps, batch, plan)
+    put_hashes(buf, 0, end, channels)
     # the recorder packs MCAP frames in this process: offload "none" writes the file here too,
     # "process" hands the packed frames to a child; both pack a batch with one compiled call
     import tempfile
@@ -89,9 +109,16 @@ def _exercise() -> None:
     from recorder import Recorder
 
     with tempfile.TemporaryDirectory() as tmp:
-        for offload in ("none", "process"):
+        # (with the Foxglove channel a writer process is handed whole frames, `pack_frames`)
+        for offload, foxglove in (
+            ("none", False),
+            ("thread", False),  # the run's thread checks each batch (`first_unfit`)
+            ("process", False),
+            ("process", True),
+        ):
             sim = Simulation(scenes[1], compile_ahead=False)
-            with Recorder(sim, mcap_path=f"{tmp}/{offload}.mcap", offload=offload) as recorder:
+            path = f"{tmp}/{offload}-{foxglove}.mcap"
+            with Recorder(sim, mcap_path=path, offload=offload, foxglove=foxglove) as recorder:
                 for batch in sim.batches(4, size=4):
                     recorder.write_batch(batch)
 
@@ -129,6 +156,13 @@ def main() -> int:
             "signatures": {
                 str(sig): scan(dispatcher.inspect_asm(sig)) for sig in dispatcher.signatures
             },
+            # loaded from numba's cache (a writer process compiled it first): numba shows no
+            # code for those, so the scan above saw nothing
+            "cached": sorted(
+                str(sig)
+                for sig, compiled in dispatcher.overloads.items()
+                if getattr(compiled.library, "_disable_inspection", False)
+            ),
         }
     with open(sys.argv[1], "w", encoding="utf-8") as f:
         json.dump(out, f)

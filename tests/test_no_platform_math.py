@@ -112,6 +112,9 @@ def test_no_fused_multiply_add_and_no_libm_call_in_any_compiled_kernel(tmp_path)
     )
     assert done.returncode == 0, done.stderr[-3000:]
     kernels = json.loads(out.read_text())
+    # every signature compiled in the scanning process, none loaded from the cache, whose
+    # machine code numba does not show
+    assert not {name: k["cached"] for name, k in kernels.items() if k["cached"]}
     compiled = {name for name, k in kernels.items() if k["signatures"]}
     assert REQUIRED <= compiled, sorted(REQUIRED - compiled)
     # every kernel of the step and of the recorder's packing was reached, except those numba
