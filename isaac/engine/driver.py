@@ -93,6 +93,7 @@ class Bodies(NamedTuple):
     category: np.ndarray  # (n,) int64, the collision filter (isaac.collision_filter)
     mask: np.ndarray  # (n,) int64
     group: np.ndarray  # (n,) int64
+    sweeps: np.ndarray  # (n,) bool, False: the filter keeps it from every other body
     no_collide: np.ndarray  # (p,) int64 sorted keys a * n + b of pairs joints keep apart
     joints: tuple  # `isaac.engine.joints.Joints`'s fields (m rows; none: m = 0)
 
@@ -387,8 +388,8 @@ def _run_steps(
     # field read there costs two atomic reference-count updates a read; see the module docstring)
     (
         vertices_local, normals_local, vertex_count, radius, thickness, inv_mass, inv_inertia,
-        restitution, friction, movable, enters_at, leaves_at, category, mask, group, no_collide,
-        joint_fields,
+        restitution, friction, movable, enters_at, leaves_at, category, mask, group, sweeps,
+        no_collide, joint_fields,
     ) = bodies  # fmt: skip
     position, angle, velocity, angular_velocity, exists = pose
     (
@@ -425,8 +426,8 @@ def _run_steps(
                 velocity, angular_velocity, radius, cfg.look_ahead, cfg.gravity_reach, expand
             )
             pairs = find_pairs(
-                position, radius, aabb, expand, movable, exists, cfg.filtered, category, mask,
-                group, no_collide, pair_a, pair_b, pair_spare, sweep_index, sweep_key,
+                position, radius, aabb, expand, movable, exists, sweeps, cfg.filtered, category,
+                mask, group, no_collide, pair_a, pair_b, pair_spare, sweep_index, sweep_key,
                 sweep_table,
             )  # fmt: skip
             if timed:
@@ -634,6 +635,7 @@ class Stepper:
                 model.category,
                 model.mask,
                 model.group,
+                model.sweeps,
                 model.no_collide,
                 tuple(model.joints),
             )

@@ -235,6 +235,7 @@ def detect(
             work.expand,
             work.movable,
             state.exists,
+            model.sweeps,
             model.filtered,
             model.category,
             model.mask,
