@@ -170,6 +170,11 @@ def _wrap(angle):
 # Speed: the helpers below take scalars (or the kernels' own array arguments), never the joint
 # table or one of its arrays: each such argument cost a reference count update, 0.4-0.9 us a
 # joint on the 100 x 100 joint grid (bench/joint_grid.py), more than the physics.
+# NO_COUNTS: the per-joint loops are compiled without reference counting at all (numba's
+# `_nrt=False`, as isaac.engine.driver's stage kernels): they allocate nothing and return no
+# array, and with counting each row view (jt[k]) and each read of the table's arrays still cost
+# atomic count updates, most of a loop's time (100 x 100 grid: a velocity pass 1.9 -> 0.4 ms,
+# the warm start 0.8 -> 0.23 ms). The kernels that allocate (`_rotations`' table) call them.
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
@@ -236,9 +241,19 @@ def prepare_joints(J, jt, position, angle, exists, inv_mass, inv_inertia, h, war
     """Fill the scratch rows for this sub-step (poses after the push-out) and load the
     accumulated impulses: `warm` (m, JOINT_IMPULSES), last sub-step's, when warm_starting
     (else they start from zero)."""
+    rot = _rotations(J, angle, exists)
+    _prepare_rows(
+        J, jt, rot, position, angle, exists, inv_mass, inv_inertia, h, warm, warm_starting
+    )
+
+
+@numba.njit(cache=True, nogil=True, _nrt=False)  # (no reference counts: see NO_COUNTS)
+def _prepare_rows(
+    J, jt, rot, position, angle, exists, inv_mass, inv_inertia, h, warm, warm_starting
+):  # fmt: skip
+    """`prepare_joints`' loop, with the bodies' (sin, cos) `rot` (`_rotations`)."""
     local_a = J.local_a
     local_b = J.local_b
-    rot = _rotations(J, angle, exists)
     for k in range(J.kind.shape[0]):
         a = J.a[k]
         b = J.b[k]
@@ -381,7 +396,7 @@ def _push(kind, a, b, jt, k, v, inv, impulses):
         )
 
 
-@numba.njit(cache=True, nogil=True)
+@numba.njit(cache=True, nogil=True, _nrt=False)  # (no reference counts: see NO_COUNTS)
 def warm_start_joints(J, jt, v, inv):
     """Apply every active joint's loaded impulses (last sub-step's) to the velocities."""
     for k in range(J.kind.shape[0]):
@@ -458,7 +473,7 @@ def _turn(x):
     return c - 1.0, s
 
 
-@numba.njit(cache=True, nogil=True)
+@numba.njit(cache=True, nogil=True, _nrt=False)  # (no reference counts: see NO_COUNTS)
 def solve_joint_velocities(J, jt, v, inv, h):
     """One Gauss-Seidel pass over the joints (velocities v (n, 3): vx, vy, w; in place)."""
     inv_h = 1.0 / h
@@ -620,6 +635,14 @@ def correct_joint_positions(J, position, angle, exists, inv_mass, inv_inertia, i
     or the limit it is past; prismatic, the axis's normal and the rotation (2x2), then the
     limit it is past. Springs are not corrected: their stretch is their force. Each correction
     is capped at MAX_LINEAR_CORRECTION (m) and MAX_ANGULAR_CORRECTION (rad)."""
+    _correct_passes(J, position, angle, exists, inv_mass, inv_inertia, iterations)
+    rot = _rotations(J, angle, exists)  # the final angles
+    _errors(J, rot, position, angle, exists, error)
+
+
+@numba.njit(cache=True, nogil=True, _nrt=False)  # (no reference counts: see NO_COUNTS)
+def _correct_passes(J, position, angle, exists, inv_mass, inv_inertia, iterations):
+    """`correct_joint_positions`' passes."""
     m = J.kind.shape[0]
     local_a = J.local_a
     local_b = J.local_b
@@ -635,7 +658,15 @@ def correct_joint_positions(J, position, angle, exists, inv_mass, inv_inertia, i
                 J.upper[k], J.length[k], axis[k, 0], axis[k, 1], local_a[k, 0], local_a[k, 1],
                 local_b[k, 0], local_b[k, 1], a, b, position, angle, inv_mass, inv_inertia,
             )  # fmt: skip
-    rot = _rotations(J, angle, exists)  # the final angles
+
+
+@numba.njit(cache=True, nogil=True, _nrt=False)  # (no reference counts: see NO_COUNTS)
+def _errors(J, rot, position, angle, exists, error):
+    """`correct_joint_positions`' remaining errors, with the bodies' (sin, cos) `rot`."""
+    m = J.kind.shape[0]
+    local_a = J.local_a
+    local_b = J.local_b
+    axis = J.axis
     for k in range(m):
         a = J.a[k]
         b = J.b[k]
@@ -801,7 +832,7 @@ def _error(
     return abs(-uy * dx + ux * dy), q
 
 
-@numba.njit(cache=True, nogil=True)
+@numba.njit(cache=True, nogil=True, _nrt=False)  # (no reference counts: see NO_COUNTS)
 def keep_joint_impulses(jt, carry):
     """The accumulated impulses (J0 .. JU) into carry (m, JOINT_IMPULSES), for the next
     sub-step's warm start (zeros for an inactive joint)."""
@@ -818,6 +849,18 @@ def write_joint_rows(
     """One step's `isaac.engine.records.JointRows` fields (m, ...) from the last sub-step's
     scratch (impulses, axes) and the final poses (anchors), `error` from the position pass."""
     rot = _rotations(J, angle, exists)
+    _write_rows(
+        J, jt, rot, position, angle, exists, error, anchor_a, anchor_b, linear, angular, motor,
+        limit, impulses, error_out,
+    )  # fmt: skip
+
+
+@numba.njit(cache=True, nogil=True, _nrt=False)  # (no reference counts: see NO_COUNTS)
+def _write_rows(
+    J, jt, rot, position, angle, exists, error, anchor_a, anchor_b, linear, angular, motor, limit,
+    impulses, error_out,
+):  # fmt: skip
+    """`write_joint_rows`' loop, with the bodies' (sin, cos) `rot` (`_rotations`)."""
     for k in range(J.kind.shape[0]):
         t = jt[k]
         for c in range(JOINT_IMPULSES):
