@@ -403,6 +403,7 @@ def _run_steps(
     gravity_dv = cfg.gravity_dv
     n = position.shape[0]
     n_joints = joint_scratch.shape[0]
+    no_error = np.empty((0, 2))  # what a sub-step whose joint errors are not logged gets
     at = Batch(*batch).offsets[start] if record else 0
     last_carried = carried
     for s in range(k):
@@ -497,9 +498,12 @@ def _run_steps(
             if cfg.explicit:
                 add_gravity(velocity, movable, exists, cfg.gx, cfg.gy, cfg.h)
             if n_joints:
+                # the errors are computed only where they are logged: a recorded step's last
+                # sub-step (`Stepper.redo_last` takes `advance`'s last step again to record it)
+                logged = record and index == cfg.substeps - 1
                 correct_joint_positions(
                     joints, position, angle, exists, inv_mass, inv_inertia,
-                    cfg.position_iterations, joint_error,
+                    cfg.position_iterations, joint_error if logged else no_error,
                 )  # fmt: skip
             if timed:
                 lap = _lap(clock, INTEGRATION, lap)
