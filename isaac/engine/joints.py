@@ -720,11 +720,11 @@ def _correct(
     mb = inv_mass[b]
     ib = inv_inertia[b]
     if kind == REVOLUTE or kind == WELD:
-        q = _wrap(angle[b] - angle[a] - reference)
         c = 0.0
         if kind == WELD and rigid:
-            c = q
+            c = _wrap(angle[b] - angle[a] - reference)
         elif kind == REVOLUTE and has_limit:
+            q = _wrap(angle[b] - angle[a] - reference)
             if q < lower:
                 c = q - lower
             elif q > upper:
@@ -819,9 +819,9 @@ def _error(
     rbx, rby = _turned(lbx, lby, sb, cb)
     dx = position[b, 0] + rbx - position[a, 0] - rax
     dy = position[b, 1] + rby - position[a, 1] - ray
-    q = _wrap(angle[b] - angle[a] - reference)
     if kind == REVOLUTE:
         return np.sqrt(dx * dx + dy * dy), 0.0
+    q = _wrap(angle[b] - angle[a] - reference)
     if kind == WELD:
         return np.sqrt(dx * dx + dy * dy), 0.0 if spring else q
     if kind == DISTANCE:
