@@ -96,6 +96,7 @@ class Bodies(NamedTuple):
     sweeps: np.ndarray  # (n,) bool, False: the filter keeps it from every other body
     no_collide: np.ndarray  # (p,) int64 sorted keys a * n + b of pairs joints keep apart
     joints: tuple  # `isaac.engine.joints.Joints`'s fields (m rows; none: m = 0)
+    joint_waves: tuple  # the same in the position passes' order (`joints.in_waves`)
 
 
 class Pose(NamedTuple):
@@ -389,7 +390,7 @@ def _run_steps(
     (
         vertices_local, normals_local, vertex_count, radius, thickness, inv_mass, inv_inertia,
         restitution, friction, movable, enters_at, leaves_at, category, mask, group, sweeps,
-        no_collide, joint_fields,
+        no_collide, joint_fields, joint_wave_fields,
     ) = bodies  # fmt: skip
     position, angle, velocity, angular_velocity, exists = pose
     (
@@ -400,6 +401,7 @@ def _run_steps(
     ) = work  # fmt: skip
     prev_key, prev_feature, prev_slot, prev_impulse, prev_tangent, joint_carry = carry
     joints = Joints(*joint_fields)
+    joint_waves = Joints(*joint_wave_fields)
     gravity_dv = cfg.gravity_dv
     n = position.shape[0]
     n_joints = joint_scratch.shape[0]
@@ -502,7 +504,7 @@ def _run_steps(
                 # sub-step (`Stepper.redo_last` takes `advance`'s last step again to record it)
                 logged = record and index == cfg.substeps - 1
                 correct_joint_positions(
-                    joints, position, angle, exists, inv_mass, inv_inertia,
+                    joints, joint_waves, position, angle, exists, inv_mass, inv_inertia,
                     cfg.position_iterations, joint_error if logged else no_error,
                 )  # fmt: skip
             if timed:
@@ -642,6 +644,7 @@ class Stepper:
                 model.sweeps,
                 model.no_collide,
                 tuple(model.joints),
+                tuple(model.joint_waves),
             )
         )
         s = settings

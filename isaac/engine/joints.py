@@ -152,6 +152,28 @@ def joint_table(joints, n_bodies: int) -> tuple[Joints, np.ndarray]:
     return table, np.array(keys, dtype=np.int64)
 
 
+def in_waves(table: Joints, n_bodies: int) -> Joints:
+    """The joint table reordered for the position passes, which visit it in this order: each
+    joint's wave is one more than the last wave of a joint before it (in the scene's order)
+    with a body in common, and the joints go wave by wave (stably).
+
+    The same bits as the scene's order: a joint's correction reads and writes its two bodies'
+    positions and angles alone, so two joints with no body in common commute exactly, and
+    every body still sees the joints that move it in the scene's order (concrete bodies
+    count too: a move by zero can still turn -0.0 into +0.0). Faster where consecutive joints
+    of the scene's order share a body (each waiting on the last one's sin/cos and division):
+    the 100 x 100 joint grid's joints fall into 396 waves of 50, and a pass takes 0.63 ms
+    instead of 0.78 (a chain's joints stay in its order, one to a wave)."""
+    m = table.kind.shape[0]
+    last = np.zeros(n_bodies, dtype=np.int64)
+    wave = np.empty(m, dtype=np.int64)
+    for k, (a, b) in enumerate(zip(table.a.tolist(), table.b.tolist())):
+        wave[k] = max(last[a], last[b])
+        last[a] = last[b] = wave[k] + 1
+    order = np.argsort(wave, kind="stable")
+    return Joints(*(np.ascontiguousarray(column[order]) for column in table))
+
+
 @numba.njit(cache=True, nogil=True, inline="always")
 def _wrap(angle):
     """Into [-pi, pi] by whole turns (isaac.engine.world.wrap_angle's rule); a non-finite
@@ -624,11 +646,15 @@ def _clamp(x, most):
 
 
 @numba.njit(cache=True, nogil=True)
-def correct_joint_positions(J, position, angle, exists, inv_mass, inv_inertia, iterations, error):
+def correct_joint_positions(
+    J, waves, position, angle, exists, inv_mass, inv_inertia, iterations, error
+):  # fmt: skip
     """After integration: `iterations` Gauss-Seidel passes that move each joint's bodies back
-    onto its rigid constraints (positions and angles in place, angles wrapped), and then each
-    joint's remaining error into error (m, 2): the anchors' distance off the constraint (m)
-    and the rotation off it (rad; weld and prismatic), 0 for what a joint leaves free.
+    onto its rigid constraints (positions and angles in place, angles wrapped), visiting the
+    joints in the order of `waves` (the table `in_waves` reorders: the same bits as J's), and
+    then each joint's remaining error into error (m, 2): the anchors' distance off the
+    constraint (m) and the rotation off it (rad; weld and prismatic), 0 for what a joint leaves
+    free.
 
     Per joint (Box2D 2.3's SolvePositionConstraints): revolute, its angle limits then the
     anchors together (2x2); weld, the rotation then the anchors; distance, the length (rigid)
@@ -639,7 +665,7 @@ def correct_joint_positions(J, position, angle, exists, inv_mass, inv_inertia, i
     An `error` of no rows asks for no errors: the compiled driver's sub-steps whose errors are
     not logged (every one but the last of a recorded step; 0.3 ms a sub-step on the 100 x 100
     joint grid)."""
-    _correct_passes(J, position, angle, exists, inv_mass, inv_inertia, iterations)
+    _correct_passes(waves, position, angle, exists, inv_mass, inv_inertia, iterations)
     if error.shape[0] == 0:
         return
     rot = _rotations(J, angle, exists)  # the final angles

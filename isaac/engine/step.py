@@ -394,6 +394,7 @@ def substep(
     if joints:
         correct_joint_positions(
             model.joints,
+            model.joint_waves,
             state.position,
             state.angle,
             state.exists,

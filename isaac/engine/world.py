@@ -17,7 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from isaac.collision_filter import colliders
-from isaac.engine.joints import Joints, joint_table
+from isaac.engine.joints import Joints, in_waves, joint_table
 from isaac.scene import Scene, checks, circle, polygon
 
 
@@ -55,6 +55,8 @@ class Model:
     circles: whether any body is a circle (else no circle code runs).
     joints: the scene's joints as arrays (`isaac.engine.joints.Joints`, m rows; m = 0: none,
         and no joint code runs).
+    joint_waves: the same joints in the order the position passes visit them
+        (`isaac.engine.joints.in_waves`).
     no_collide: (p,) int64 sorted keys a * n + b (a < b) of the pairs joints keep apart.
     """
 
@@ -81,6 +83,7 @@ class Model:
     sweeps: np.ndarray
     circles: bool
     joints: Joints
+    joint_waves: Joints
     no_collide: np.ndarray
 
     @property
@@ -211,6 +214,7 @@ def build_model(scene: Scene) -> Model:
         sweeps=colliders(category, mask, group) if filtered else np.ones(n, dtype=bool),
         circles=any(b.circle is not None for b in scene.bodies),
         joints=joints,
+        joint_waves=in_waves(joints, n),
         no_collide=no_collide,
     )
 
