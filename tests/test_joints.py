@@ -289,9 +289,8 @@ def test_the_position_passes_in_waves_give_the_scene_orders_bits(monkeypatch):
     """`in_waves` reorders the joints for the position passes; every body still sees its
     joints in the scene's order, so the run is the one in the scene's order, bit for bit
     (Box2D v3's joint grid, 8 x 8: consecutive joints share bodies; 60 steps)."""
-    from bench.joint_grid import grid_scene
-
     import isaac.engine.world
+    from bench.joint_grid import grid_scene
     from isaac.engine.joints import in_waves
 
     scene = grid_scene(8)

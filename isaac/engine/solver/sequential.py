@@ -156,10 +156,7 @@ def solve_sequential(
     if n_joints and warm_starting:
         warm_start_joints(J, jt, v, inv)
     # the velocities into each moving body's first unit and every unit side with a concrete body
-    # (`units`: the bodies that have one, so that the joints' hand-overs each iteration visit
-    # those alone, not every body: the 100 x 100 joint grid has 10,000 bodies and no contact)
-    units = _bodies_with_units(first)
-    _to_first_units(t, first, v, units)
+    _to_first_units(t, first, v)
     for f in range(fixed.shape[0]):
         at = fixed[f]
         body = fixed_body[f]
@@ -170,16 +167,19 @@ def solve_sequential(
     if n_joints == 0:
         run_passes(t, kind, successor, groups, iterations)
     else:
-        # after each pass the velocities are back in each body's first unit (its successor)
+        # after each pass the velocities are back in each body's first unit (its successor);
+        # handed between the units and v for the bodies that have a unit alone (`units`), not
+        # for every body each iteration (the 100 x 100 joint grid has 10,000 bodies, no contact)
+        units = _bodies_with_units(first)
         for _ in range(iterations):
             run_passes(t, kind, successor, groups, 1)
-            _from_first_units(t, first, v, units)
+            _from_units(t, first, v, units)
             solve_joint_velocities(J, jt, v, inv, h)
-            _to_first_units(t, first, v, units)
+            _to_units(t, first, v, units)
 
     # the velocities the passes handed back to each moving body's first unit, and every row's
     # accumulated impulses
-    _from_first_units(t, first, v, units)
+    _from_first_units(t, first, v)
     for g in range(groups):
         base = g * GROUP_WIDTH
         for j in range(LANES):
@@ -213,6 +213,26 @@ def solve_sequential(
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
+def _to_first_units(t, first, v):
+    for body in range(v.shape[0]):
+        at = first[body]
+        if at >= 0:
+            t[at] = v[body, 0]
+            t[at + LANES] = v[body, 1]
+            t[at + 2 * LANES] = v[body, 2]
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _from_first_units(t, first, v):
+    for body in range(v.shape[0]):
+        at = first[body]
+        if at >= 0:
+            v[body, 0] = t[at]
+            v[body, 1] = t[at + LANES]
+            v[body, 2] = t[at + 2 * LANES]
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
 def _bodies_with_units(first):
     """The bodies (ascending) whose first unit `first` gives (>= 0)."""
     count = 0
@@ -229,7 +249,8 @@ def _bodies_with_units(first):
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
-def _to_first_units(t, first, v, units):
+def _to_units(t, first, v, units):
+    """`_to_first_units` for the bodies `units` (`_bodies_with_units`)."""
     for u in range(units.shape[0]):
         body = units[u]
         at = first[body]
@@ -239,7 +260,8 @@ def _to_first_units(t, first, v, units):
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
-def _from_first_units(t, first, v, units):
+def _from_units(t, first, v, units):
+    """`_from_first_units` for the bodies `units` (`_bodies_with_units`)."""
     for u in range(units.shape[0]):
         body = units[u]
         at = first[body]
