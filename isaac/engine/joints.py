@@ -162,8 +162,8 @@ def in_waves(table: Joints, n_bodies: int) -> Joints:
     every body still sees the joints that move it in the scene's order (concrete bodies
     count too: a move by zero can still turn -0.0 into +0.0). Faster where consecutive joints
     of the scene's order share a body (each waiting on the last one's sin/cos and division):
-    the 100 x 100 joint grid's joints fall into 396 waves of 50, and a pass takes 0.63 ms
-    instead of 0.78 (a chain's joints stay in its order, one to a wave)."""
+    the 100 x 100 joint grid's joints fall into 396 waves of 50, and a pass takes 0.61 ms
+    instead of 0.74 (a chain's joints stay in its order, one to a wave)."""
     m = table.kind.shape[0]
     last = np.zeros(n_bodies, dtype=np.int64)
     wave = np.empty(m, dtype=np.int64)
@@ -195,8 +195,9 @@ def _wrap(angle):
 # NO_COUNTS: the per-joint loops are compiled without reference counting at all (numba's
 # `_nrt=False`, as isaac.engine.driver's stage kernels): they allocate nothing and return no
 # array, and with counting each row view (jt[k]) and each read of the table's arrays still cost
-# atomic count updates, most of a loop's time (100 x 100 grid: a velocity pass 1.9 -> 0.4 ms,
-# the warm start 0.8 -> 0.23 ms). The kernels that allocate (`_rotations`' table) call them.
+# atomic count updates, most of a loop's time (100 x 100 grid, with the other changes of that
+# pass: a velocity pass 0.57 -> 0.33 ms, the warm start 0.76 -> 0.24 ms, bench/README.md). The
+# kernels that allocate (`_rotations`' table) call them.
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
