@@ -7,7 +7,7 @@ import itertools
 import numpy as np
 import pytest
 
-from isaac.collision_filter import collides
+from isaac.collision_filter import colliders, collides
 from isaac.engine.simulation import Simulation
 from isaac.errors import SceneError
 from isaac.scene import load_scene, load_scene_text, scene_to_yaml
@@ -91,6 +91,7 @@ def test_the_broad_phase_drops_filtered_pairs_before_the_narrow_phase():
         expand=np.zeros(n),
         movable=np.ones(n, dtype=bool),
         exists=np.ones(n, dtype=bool),
+        sweeps=np.ones(n, dtype=bool),
         category=np.ones(n, dtype=np.int64),
         mask=np.full(n, 0xFFFFFFFF, dtype=np.int64),
         group=np.array([0, -1, -1, 0], dtype=np.int64),
@@ -110,6 +111,44 @@ def test_the_broad_phase_drops_filtered_pairs_before_the_narrow_phase():
         found[filtered] = list(zip(scratch["pair_a"][:count], scratch["pair_b"][:count]))
     assert (1, 2) in found[False] and (2, 3) in found[False]
     assert found[True] == [p for p in found[False] if p not in ((1, 2), (2, 3))]
+
+
+def test_colliders_are_the_bodies_some_other_body_may_collide_with():
+    """`colliders` by filter classes against the rule tried on every pair of bodies."""
+    rng = np.random.default_rng(14)
+    for _ in range(200):
+        n = int(rng.integers(1, 9))
+        category = rng.choice([1, 2, 4], n).astype(np.int64)
+        mask = rng.choice([0, 1, 2, 5, 0xFFFFFFFF], n).astype(np.int64)
+        group = rng.choice([-2, -1, 0, 0, 1], n).astype(np.int64)
+        expected = [
+            any(
+                bool(collides(category[i], mask[i], group[i], category[j], mask[j], group[j]))
+                for j in range(n)
+                if j != i
+            )
+            for i in range(n)
+        ]
+        assert colliders(category, mask, group).tolist() == expected
+
+
+def test_bodies_left_out_of_the_sweep_change_no_bit(monkeypatch):
+    """Box2D v3's joint grid: every circle in one negative group, so none enters the sweep;
+    the run is the one that sweeps them all (and finds no pair)."""
+    import isaac.engine.world
+    from bench.joint_grid import grid_scene
+
+    scene = grid_scene(6)
+    left_out = Simulation(scene)
+    assert not left_out.model.sweeps.any()
+    monkeypatch.setattr(isaac.engine.world, "colliders", lambda c, m, g: np.ones(len(c), bool))
+    swept = Simulation(scene)
+    assert swept.model.sweeps.all()
+    for sim in (left_out, swept):
+        sim.advance(40)  # the net swings down from its seven concrete bodies
+        assert len(sim.record().contacts) == 0
+    for field in ("position", "angle", "velocity", "angular_velocity"):
+        assert np.array_equal(getattr(left_out.state, field), getattr(swept.state, field))
 
 
 def test_the_shipped_filtering_scene_keeps_its_filtered_pairs_apart():

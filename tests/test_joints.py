@@ -133,8 +133,10 @@ def test_a_40_link_chain_stays_connected_for_10_s():
     assert worst < 1e-3
 
 
-def test_a_chain_gives_the_same_bits_on_every_path_and_after_a_resume():
-    scene = _chain(links=8, dt=1 / 120)
+@pytest.mark.parametrize("substeps", [1, 3])
+def test_a_chain_gives_the_same_bits_on_every_path_and_after_a_resume(substeps):
+    # (with sub-steps the driver computes the joints' errors only in a recorded step's last)
+    scene = _chain(links=8, dt=1 / 120, substeps=substeps)
     staged = Simulation(scene)
     by_step = [staged.step() for _ in range(120)]
     driven = Simulation(scene)
@@ -281,3 +283,24 @@ def test_a_whipping_chain_stays_together_with_one_sub_step(world):
         fastest = max(fastest, float(np.abs(r.angular_velocity).max()) * sim.settings.h)
     assert fastest > 0.05  # the fast-turn branch was taken
     assert worst < 0.02, worst
+
+
+def test_the_position_passes_in_waves_give_the_scene_orders_bits(monkeypatch):
+    """`in_waves` reorders the joints for the position passes; every body still sees its
+    joints in the scene's order, so the run is the one in the scene's order, bit for bit
+    (Box2D v3's joint grid, 8 x 8: consecutive joints share bodies; 60 steps)."""
+    import isaac.engine.world
+    from bench.joint_grid import grid_scene
+    from isaac.engine.joints import in_waves
+
+    scene = grid_scene(8)
+    waves = Simulation(scene)
+    reordered = in_waves(waves.model.joints, waves.model.n_bodies)
+    assert not np.array_equal(reordered.a, waves.model.joints.a)  # a different order
+    monkeypatch.setattr(isaac.engine.world, "in_waves", lambda table, n: table)
+    in_order = Simulation(scene)
+    assert np.array_equal(in_order.model.joint_waves.a, in_order.model.joints.a)
+    for sim in (waves, in_order):
+        sim.advance(60)
+    assert state_hash(waves.record()) == state_hash(in_order.record())
+    assert np.array_equal(waves.record().joints.error, in_order.record().joints.error)

@@ -93,8 +93,10 @@ class Bodies(NamedTuple):
     category: np.ndarray  # (n,) int64, the collision filter (isaac.collision_filter)
     mask: np.ndarray  # (n,) int64
     group: np.ndarray  # (n,) int64
+    sweeps: np.ndarray  # (n,) bool, False: the filter keeps it from every other body
     no_collide: np.ndarray  # (p,) int64 sorted keys a * n + b of pairs joints keep apart
     joints: tuple  # `isaac.engine.joints.Joints`'s fields (m rows; none: m = 0)
+    joint_waves: tuple  # the same in the position passes' order (`joints.in_waves`)
 
 
 class Pose(NamedTuple):
@@ -387,8 +389,8 @@ def _run_steps(
     # field read there costs two atomic reference-count updates a read; see the module docstring)
     (
         vertices_local, normals_local, vertex_count, radius, thickness, inv_mass, inv_inertia,
-        restitution, friction, movable, enters_at, leaves_at, category, mask, group, no_collide,
-        joint_fields,
+        restitution, friction, movable, enters_at, leaves_at, category, mask, group, sweeps,
+        no_collide, joint_fields, joint_wave_fields,
     ) = bodies  # fmt: skip
     position, angle, velocity, angular_velocity, exists = pose
     (
@@ -399,9 +401,11 @@ def _run_steps(
     ) = work  # fmt: skip
     prev_key, prev_feature, prev_slot, prev_impulse, prev_tangent, joint_carry = carry
     joints = Joints(*joint_fields)
+    joint_waves = Joints(*joint_wave_fields)
     gravity_dv = cfg.gravity_dv
     n = position.shape[0]
     n_joints = joint_scratch.shape[0]
+    no_error = np.empty((0, 2))  # what a sub-step whose joint errors are not logged gets
     at = Batch(*batch).offsets[start] if record else 0
     last_carried = carried
     for s in range(k):
@@ -425,8 +429,8 @@ def _run_steps(
                 velocity, angular_velocity, radius, cfg.look_ahead, cfg.gravity_reach, expand
             )
             pairs = find_pairs(
-                position, radius, aabb, expand, movable, exists, cfg.filtered, category, mask,
-                group, no_collide, pair_a, pair_b, pair_spare, sweep_index, sweep_key,
+                position, radius, aabb, expand, movable, exists, sweeps, cfg.filtered, category,
+                mask, group, no_collide, pair_a, pair_b, pair_spare, sweep_index, sweep_key,
                 sweep_table,
             )  # fmt: skip
             if timed:
@@ -496,9 +500,12 @@ def _run_steps(
             if cfg.explicit:
                 add_gravity(velocity, movable, exists, cfg.gx, cfg.gy, cfg.h)
             if n_joints:
+                # the errors are computed only where they are logged: a recorded step's last
+                # sub-step (`Stepper.redo_last` takes `advance`'s last step again to record it)
+                logged = record and index == cfg.substeps - 1
                 correct_joint_positions(
-                    joints, position, angle, exists, inv_mass, inv_inertia,
-                    cfg.position_iterations, joint_error,
+                    joints, joint_waves, position, angle, exists, inv_mass, inv_inertia,
+                    cfg.position_iterations, joint_error if logged else no_error,
                 )  # fmt: skip
             if timed:
                 lap = _lap(clock, INTEGRATION, lap)
@@ -634,8 +641,10 @@ class Stepper:
                 model.category,
                 model.mask,
                 model.group,
+                model.sweeps,
                 model.no_collide,
                 tuple(model.joints),
+                tuple(model.joint_waves),
             )
         )
         s = settings

@@ -152,6 +152,28 @@ def joint_table(joints, n_bodies: int) -> tuple[Joints, np.ndarray]:
     return table, np.array(keys, dtype=np.int64)
 
 
+def in_waves(table: Joints, n_bodies: int) -> Joints:
+    """The joint table reordered for the position passes, which visit it in this order: each
+    joint's wave is one more than the last wave of a joint before it (in the scene's order)
+    with a body in common, and the joints go wave by wave (stably).
+
+    The same bits as the scene's order: a joint's correction reads and writes its two bodies'
+    positions and angles alone, so two joints with no body in common commute exactly, and
+    every body still sees the joints that move it in the scene's order (concrete bodies
+    count too: a move by zero can still turn -0.0 into +0.0). Faster where consecutive joints
+    of the scene's order share a body (each waiting on the last one's sin/cos and division):
+    the 100 x 100 joint grid's joints fall into 396 waves of 50, and a pass takes 0.61 ms
+    instead of 0.74 (a chain's joints stay in its order, one to a wave)."""
+    m = table.kind.shape[0]
+    last = np.zeros(n_bodies, dtype=np.int64)
+    wave = np.empty(m, dtype=np.int64)
+    for k, (a, b) in enumerate(zip(table.a.tolist(), table.b.tolist())):
+        wave[k] = max(last[a], last[b])
+        last[a] = last[b] = wave[k] + 1
+    order = np.argsort(wave, kind="stable")
+    return Joints(*(np.ascontiguousarray(column[order]) for column in table))
+
+
 @numba.njit(cache=True, nogil=True, inline="always")
 def _wrap(angle):
     """Into [-pi, pi] by whole turns (isaac.engine.world.wrap_angle's rule); a non-finite
@@ -170,6 +192,12 @@ def _wrap(angle):
 # Speed: the helpers below take scalars (or the kernels' own array arguments), never the joint
 # table or one of its arrays: each such argument cost a reference count update, 0.4-0.9 us a
 # joint on the 100 x 100 joint grid (bench/joint_grid.py), more than the physics.
+# NO_COUNTS: the per-joint loops are compiled without reference counting at all (numba's
+# `_nrt=False`, as isaac.engine.driver's stage kernels): they allocate nothing and return no
+# array, and with counting each row view (jt[k]) and each read of the table's arrays still cost
+# atomic count updates, most of a loop's time (100 x 100 grid, with the other changes of that
+# pass: a velocity pass 0.57 -> 0.33 ms, the warm start 0.76 -> 0.24 ms, bench/README.md). The
+# kernels that allocate (`_rotations`' table) call them.
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
@@ -236,9 +264,19 @@ def prepare_joints(J, jt, position, angle, exists, inv_mass, inv_inertia, h, war
     """Fill the scratch rows for this sub-step (poses after the push-out) and load the
     accumulated impulses: `warm` (m, JOINT_IMPULSES), last sub-step's, when warm_starting
     (else they start from zero)."""
+    rot = _rotations(J, angle, exists)
+    _prepare_rows(
+        J, jt, rot, position, angle, exists, inv_mass, inv_inertia, h, warm, warm_starting
+    )
+
+
+@numba.njit(cache=True, nogil=True, _nrt=False)  # (no reference counts: see NO_COUNTS)
+def _prepare_rows(
+    J, jt, rot, position, angle, exists, inv_mass, inv_inertia, h, warm, warm_starting
+):  # fmt: skip
+    """`prepare_joints`' loop, with the bodies' (sin, cos) `rot` (`_rotations`)."""
     local_a = J.local_a
     local_b = J.local_b
-    rot = _rotations(J, angle, exists)
     for k in range(J.kind.shape[0]):
         a = J.a[k]
         b = J.b[k]
@@ -381,7 +419,7 @@ def _push(kind, a, b, jt, k, v, inv, impulses):
         )
 
 
-@numba.njit(cache=True, nogil=True)
+@numba.njit(cache=True, nogil=True, _nrt=False)  # (no reference counts: see NO_COUNTS)
 def warm_start_joints(J, jt, v, inv):
     """Apply every active joint's loaded impulses (last sub-step's) to the velocities."""
     for k in range(J.kind.shape[0]):
@@ -458,7 +496,7 @@ def _turn(x):
     return c - 1.0, s
 
 
-@numba.njit(cache=True, nogil=True)
+@numba.njit(cache=True, nogil=True, _nrt=False)  # (no reference counts: see NO_COUNTS)
 def solve_joint_velocities(J, jt, v, inv, h):
     """One Gauss-Seidel pass over the joints (velocities v (n, 3): vx, vy, w; in place)."""
     inv_h = 1.0 / h
@@ -609,17 +647,35 @@ def _clamp(x, most):
 
 
 @numba.njit(cache=True, nogil=True)
-def correct_joint_positions(J, position, angle, exists, inv_mass, inv_inertia, iterations, error):
+def correct_joint_positions(
+    J, waves, position, angle, exists, inv_mass, inv_inertia, iterations, error
+):  # fmt: skip
     """After integration: `iterations` Gauss-Seidel passes that move each joint's bodies back
-    onto its rigid constraints (positions and angles in place, angles wrapped), and then each
-    joint's remaining error into error (m, 2): the anchors' distance off the constraint (m)
-    and the rotation off it (rad; weld and prismatic), 0 for what a joint leaves free.
+    onto its rigid constraints (positions and angles in place, angles wrapped), visiting the
+    joints in the order of `waves` (the table `in_waves` reorders: the same bits as J's), and
+    then each joint's remaining error into error (m, 2): the anchors' distance off the
+    constraint (m) and the rotation off it (rad; weld and prismatic), 0 for what a joint leaves
+    free.
 
     Per joint (Box2D 2.3's SolvePositionConstraints): revolute, its angle limits then the
     anchors together (2x2); weld, the rotation then the anchors; distance, the length (rigid)
     or the limit it is past; prismatic, the axis's normal and the rotation (2x2), then the
     limit it is past. Springs are not corrected: their stretch is their force. Each correction
-    is capped at MAX_LINEAR_CORRECTION (m) and MAX_ANGULAR_CORRECTION (rad)."""
+    is capped at MAX_LINEAR_CORRECTION (m) and MAX_ANGULAR_CORRECTION (rad).
+
+    An `error` of no rows asks for no errors: the compiled driver's sub-steps whose errors are
+    not logged (every one but the last of a recorded step; 0.3 ms a sub-step on the 100 x 100
+    joint grid)."""
+    _correct_passes(waves, position, angle, exists, inv_mass, inv_inertia, iterations)
+    if error.shape[0] == 0:
+        return
+    rot = _rotations(J, angle, exists)  # the final angles
+    _errors(J, rot, position, angle, exists, error)
+
+
+@numba.njit(cache=True, nogil=True, _nrt=False)  # (no reference counts: see NO_COUNTS)
+def _correct_passes(J, position, angle, exists, inv_mass, inv_inertia, iterations):
+    """`correct_joint_positions`' passes."""
     m = J.kind.shape[0]
     local_a = J.local_a
     local_b = J.local_b
@@ -635,7 +691,15 @@ def correct_joint_positions(J, position, angle, exists, inv_mass, inv_inertia, i
                 J.upper[k], J.length[k], axis[k, 0], axis[k, 1], local_a[k, 0], local_a[k, 1],
                 local_b[k, 0], local_b[k, 1], a, b, position, angle, inv_mass, inv_inertia,
             )  # fmt: skip
-    rot = _rotations(J, angle, exists)  # the final angles
+
+
+@numba.njit(cache=True, nogil=True, _nrt=False)  # (no reference counts: see NO_COUNTS)
+def _errors(J, rot, position, angle, exists, error):
+    """`correct_joint_positions`' remaining errors, with the bodies' (sin, cos) `rot`."""
+    m = J.kind.shape[0]
+    local_a = J.local_a
+    local_b = J.local_b
+    axis = J.axis
     for k in range(m):
         a = J.a[k]
         b = J.b[k]
@@ -683,11 +747,11 @@ def _correct(
     mb = inv_mass[b]
     ib = inv_inertia[b]
     if kind == REVOLUTE or kind == WELD:
-        q = _wrap(angle[b] - angle[a] - reference)
         c = 0.0
         if kind == WELD and rigid:
-            c = q
+            c = _wrap(angle[b] - angle[a] - reference)
         elif kind == REVOLUTE and has_limit:
+            q = _wrap(angle[b] - angle[a] - reference)
             if q < lower:
                 c = q - lower
             elif q > upper:
@@ -782,9 +846,9 @@ def _error(
     rbx, rby = _turned(lbx, lby, sb, cb)
     dx = position[b, 0] + rbx - position[a, 0] - rax
     dy = position[b, 1] + rby - position[a, 1] - ray
-    q = _wrap(angle[b] - angle[a] - reference)
     if kind == REVOLUTE:
         return np.sqrt(dx * dx + dy * dy), 0.0
+    q = _wrap(angle[b] - angle[a] - reference)
     if kind == WELD:
         return np.sqrt(dx * dx + dy * dy), 0.0 if spring else q
     if kind == DISTANCE:
@@ -801,7 +865,7 @@ def _error(
     return abs(-uy * dx + ux * dy), q
 
 
-@numba.njit(cache=True, nogil=True)
+@numba.njit(cache=True, nogil=True, _nrt=False)  # (no reference counts: see NO_COUNTS)
 def keep_joint_impulses(jt, carry):
     """The accumulated impulses (J0 .. JU) into carry (m, JOINT_IMPULSES), for the next
     sub-step's warm start (zeros for an inactive joint)."""
@@ -818,6 +882,18 @@ def write_joint_rows(
     """One step's `isaac.engine.records.JointRows` fields (m, ...) from the last sub-step's
     scratch (impulses, axes) and the final poses (anchors), `error` from the position pass."""
     rot = _rotations(J, angle, exists)
+    _write_rows(
+        J, jt, rot, position, angle, exists, error, anchor_a, anchor_b, linear, angular, motor,
+        limit, impulses, error_out,
+    )  # fmt: skip
+
+
+@numba.njit(cache=True, nogil=True, _nrt=False)  # (no reference counts: see NO_COUNTS)
+def _write_rows(
+    J, jt, rot, position, angle, exists, error, anchor_a, anchor_b, linear, angular, motor, limit,
+    impulses, error_out,
+):  # fmt: skip
+    """`write_joint_rows`' loop, with the bodies' (sin, cos) `rot` (`_rotations`)."""
     for k in range(J.kind.shape[0]):
         t = jt[k]
         for c in range(JOINT_IMPULSES):

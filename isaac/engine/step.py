@@ -235,6 +235,7 @@ def detect(
             work.expand,
             work.movable,
             state.exists,
+            model.sweeps,
             model.filtered,
             model.category,
             model.mask,
@@ -393,6 +394,7 @@ def substep(
     if joints:
         correct_joint_positions(
             model.joints,
+            model.joint_waves,
             state.position,
             state.angle,
             state.exists,

@@ -16,7 +16,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from isaac.engine.joints import Joints, joint_table
+from isaac.collision_filter import colliders
+from isaac.engine.joints import Joints, in_waves, joint_table
 from isaac.scene import Scene, checks, circle, polygon
 
 
@@ -48,9 +49,14 @@ class Model:
     category, mask, group: (n,) int64, the collision filter (isaac.collision_filter).
     filtered: whether the broad phase must test pairs against a filter: some body's filter is
         not the default, or a joint keeps its bodies from colliding (else it tests none).
+    sweeps: (n,) bool, whether the filter lets some other body collide with it
+        (`isaac.collision_filter.colliders`); the broad phase leaves the others out of its
+        sweep (they make no pair), as it does absent bodies.
     circles: whether any body is a circle (else no circle code runs).
     joints: the scene's joints as arrays (`isaac.engine.joints.Joints`, m rows; m = 0: none,
         and no joint code runs).
+    joint_waves: the same joints in the order the position passes visit them
+        (`isaac.engine.joints.in_waves`).
     no_collide: (p,) int64 sorted keys a * n + b (a < b) of the pairs joints keep apart.
     """
 
@@ -74,8 +80,10 @@ class Model:
     mask: np.ndarray
     group: np.ndarray
     filtered: bool
+    sweeps: np.ndarray
     circles: bool
     joints: Joints
+    joint_waves: Joints
     no_collide: np.ndarray
 
     @property
@@ -178,6 +186,10 @@ def build_model(scene: Scene) -> Model:
     if refusal is not None:  # a scene built in Python (the loader refuses it at its key)
         raise ValueError(refusal)
     joints, no_collide = joint_table(scene.joints, n)
+    category = np.array([b.category for b in scene.bodies], dtype=np.int64)
+    mask = np.array([b.mask for b in scene.bodies], dtype=np.int64)
+    group = np.array([b.group for b in scene.bodies], dtype=np.int64)
+    filtered = any(b.filtered for b in scene.bodies) or len(no_collide) > 0
     return Model(
         names=tuple(b.name for b in scene.bodies),
         vertices_local=verts,
@@ -195,12 +207,14 @@ def build_model(scene: Scene) -> Model:
         enters_at=enters_at,
         leaves_at=leaves_at,
         timed=bool(np.any(enters_at > 0.0) or np.any(np.isfinite(leaves_at))),
-        category=np.array([b.category for b in scene.bodies], dtype=np.int64),
-        mask=np.array([b.mask for b in scene.bodies], dtype=np.int64),
-        group=np.array([b.group for b in scene.bodies], dtype=np.int64),
-        filtered=any(b.filtered for b in scene.bodies) or len(no_collide) > 0,
+        category=category,
+        mask=mask,
+        group=group,
+        filtered=filtered,
+        sweeps=colliders(category, mask, group) if filtered else np.ones(n, dtype=bool),
         circles=any(b.circle is not None for b in scene.bodies),
         joints=joints,
+        joint_waves=in_waves(joints, n),
         no_collide=no_collide,
     )
 
