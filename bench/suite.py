@@ -221,7 +221,7 @@ STARTUP_CODE = """\
 from bench.peers import make_engine
 from bench.scenes import build
 engine = make_engine({engine!r}, build('pyramid-10').scene)
-engine.step()
+engine.block(1) if hasattr(engine, "block") else engine.step()  # the row's own path
 """
 
 
