@@ -135,7 +135,7 @@ def test_table_and_logs_are_the_same_with_one_and_two_workers_and_any_chunking(t
 
 
 @pytest.mark.parametrize(
-    "runs, workers, least", [(1000, 2, 12), (1000, 1, 12), (100, 2, 1), (5, 4, 1)]
+    "runs, workers, least", [(1000, 2, 20), (1000, 1, 20), (100, 2, 1), (5, 4, 1)]
 )
 def test_guided_chunks_cover_every_run_once_in_order_and_shrink_to_the_least(runs, workers, least):
     from isaac.app.sweep.command import MAX_CHUNK, TASKS_PER_WORKER, _guided_chunks

@@ -44,16 +44,18 @@ from isaac.app.sweep.cluster import start_cluster
 from isaac.app.sweep.spec import Sweep, SweepError, load_runs, load_sweep, refusal
 from isaac.errors import IsaacError
 
-# runs per task at most: a task costs the scheduler about a millisecond, a small run less; a
-# rescheduled chunk redoes only its unfinished runs (their rows are on disk), so chunks may be big
-MAX_CHUNK = 100
+# runs per task at most: a chunk costs about 10 ms of CPU besides its runs (its check, summary
+# and run tasks; 2026-12-02, 2-worker local cluster: 4 ms in this process, the scheduler's, and 6
+# in the workers), a small run about 1.5 ms; a rescheduled chunk redoes only its unfinished runs
+# (their rows are on disk), so chunks may be big
+MAX_CHUNK = 250
 # chunk sizes shrink as the runs left do (guided self-scheduling): each chunk is the runs left
 # over TASKS_PER_WORKER x workers, so the last chunks, which decide how long the slowest worker
 # runs on alone at the end of the check and of the fan-out, are small
 TASKS_PER_WORKER = 2
-# ... but no smaller than this many body-steps (the base scene's bodies x steps a run): a task
-# costs a worker 2-3 ms besides its runs (Dask's messages), a 2-body run of 200 steps about 1 ms
-MIN_CHUNK_BODY_STEPS = 5_000
+# ... but no smaller than this many body-steps (the base scene's bodies x steps a run): 20 runs
+# of a 2-body scene at 200 steps (about 30 ms), one run of a 100-body pile
+MIN_CHUNK_BODY_STEPS = 8_000
 MAX_WARM_UP = 8  # distinct world settings compiled before the fan-out (others as they come)
 # runs whose scenes are checked here before a local cluster is started, for at most this long:
 # where the line falls changes which process finds a refusal, never which run it names (the
@@ -117,7 +119,10 @@ def register(subparsers) -> None:
         "--workers", type=int, metavar="N", help="local cluster size (default: one per core)"
     )
     p.add_argument(
-        "--chunk", type=int, metavar="K", help=f"runs per task (default: up to {MAX_CHUNK})"
+        "--chunk",
+        type=int,
+        metavar="K",
+        help=f"runs per task (default: up to {MAX_CHUNK}, fewer towards the end)",
     )
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.add_argument("--no-plots", action="store_true", help="write no PNG plots")
@@ -385,26 +390,40 @@ def _fan_out(sweep, todo, out, done, pre, client, scheduler, workers, chunk, pro
 
             bar = tqdm(total=sweep.n_runs, initial=len(done), unit="run", desc=sweep.scene_name)
         by_future = {f.key: k for k, f in enumerate(futures[:-1])}
+        # the rows stay on the workers until every chunk is done and then come in one gather
+        # (a message per worker): fetching each chunk's rows as it finished cost this process
+        # and the workers about 2.5 ms of CPU a chunk, taken from the runs on a 2-core machine
+        finished = []
         for future in as_completed(futures[:-1]):
-            task = tasks[by_future[future.key]]
-            try:
-                rows = future.result()
-            except Exception as exc:  # noqa: BLE001 - e.g. KilledWorker: the chunk's runs fail
-                message = " ".join(f"{type(exc).__name__}: {exc}".split())
-                written = {
-                    r["index"]: r
-                    for r in work.read_rows(work.rows_path(out, task["runs"][0]))
-                    if work.row_is_complete(out, r)
-                }
-                rows = [
-                    written.get(i)
-                    or {"index": i, **sweep.params(i), "status": "failed", "error": message}
-                    for i in task["runs"]
-                ]
+            finished.append(future)
+            if bar is not None:
+                bar.update(len(tasks[by_future[future.key]]["runs"]))
+        ok = [f for f in finished if f.status == "finished"]
+        for rows in client.gather(ok, errors="skip"):
             for row in rows:
                 done[row["index"]] = row
-            if bar is not None:
-                bar.update(len(rows))
+        for future in finished:
+            task = tasks[by_future[future.key]]
+            if all(i in done for i in task["runs"]):
+                continue
+            # e.g. KilledWorker: the chunk's unfinished runs fail
+            if future.status == "error":
+                exc = future.exception()
+                message = " ".join(f"{type(exc).__name__}: {exc}".split())
+            else:
+                message = "the chunk's rows were lost with its worker"
+            written = {
+                r["index"]: r
+                for r in work.read_rows(work.rows_path(out, task["runs"][0]))
+                if work.row_is_complete(out, r)
+            }
+            for i in task["runs"]:
+                done[i] = written.get(i) or {
+                    "index": i,
+                    **sweep.params(i),
+                    "status": "failed",
+                    "error": message,
+                }
         phases["runs"] = time.perf_counter() - t1
     except KeyboardInterrupt:
         interrupted = True
