@@ -44,10 +44,10 @@ from isaac.app.sweep.cluster import start_cluster
 from isaac.app.sweep.spec import Sweep, SweepError, load_runs, load_sweep, refusal
 from isaac.errors import IsaacError
 
-# runs per task at most: a chunk costs about 10 ms of CPU besides its runs (its check, summary
-# and run tasks; 2026-12-02, 2-worker local cluster: 4 ms in this process, the scheduler's, and 6
-# in the workers), a small run about 1.5 ms; a rescheduled chunk redoes only its unfinished runs
-# (their rows are on disk), so chunks may be big
+# runs per task at most: a chunk costs about 8 ms of CPU besides its runs (its check, summary
+# and run tasks, trivial ones timed on the 2-worker local cluster, 2026-12-02: 3 ms in this
+# process, which holds the scheduler, and 5 in the workers), a small run about 1.5 ms; a
+# rescheduled chunk redoes only its unfinished runs (their rows are on disk), so chunks may be big
 MAX_CHUNK = 250
 # chunk sizes shrink as the runs left do (guided self-scheduling): each chunk is the runs left
 # over TASKS_PER_WORKER x workers, so the last chunks, which decide how long the slowest worker
