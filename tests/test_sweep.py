@@ -459,6 +459,27 @@ def test_a_refusal_found_on_the_cluster_is_the_same_and_comes_before_anything(tm
     assert not (tmp_path / "out").exists()  # nothing ran or was written
 
 
+def test_an_output_folder_that_cannot_be_made_is_said_in_one_line_and_nothing_runs(
+    tmp_path, cluster
+):
+    # OUT is made on the cluster, by the task between the check and the runs: its error comes
+    # back as the sweep's own (exit 2), and no run starts
+    from isaac.app.sweep.spec import SweepError
+
+    _, client = cluster
+    sweep = _write(
+        tmp_path,
+        f"scene: {SCENES / 'bounce.yaml'}\nruns:\n  grid:\n"
+        "    bodies.box.restitution: [0.2, 0.4]\nrecord: none\n",
+    )
+    (tmp_path / "file").write_text("not a folder")
+    out = tmp_path / "file" / "out"
+    with pytest.raises(SweepError) as refused:
+        execute(str(sweep), str(out), client=client)
+    assert str(refused.value).startswith(f"{sweep}: cannot write --out {out}: ")
+    assert (tmp_path / "file").read_text() == "not a folder"
+
+
 RANDOM_BAD = [
     (
         "bad distribution",
