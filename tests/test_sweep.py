@@ -627,8 +627,10 @@ def _children(pid: int) -> list[int]:
 
 @pytest.mark.slow
 def test_ctrl_c_stops_cleanly_and_the_same_command_resumes(tmp_path, cluster):
+    # runs long enough (1,500 steps, recorded) that the 40 cannot all finish between the third
+    # row seen here (polled every 0.2 s) and the interrupt
     sweep = _write(
-        tmp_path, BOUNCE_SWEEP.format(scene=SCENES / "bounce.yaml", steps=300, record="mcap")
+        tmp_path, BOUNCE_SWEEP.format(scene=SCENES / "bounce.yaml", steps=1500, record="mcap")
     )
     out = tmp_path / "out"
     cmd = [
