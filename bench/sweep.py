@@ -148,13 +148,13 @@ def profile_chunk(path: Path, runs: int) -> dict:
     """One chunk of `runs` runs of sweep `path` in this process, timed part by part: ms per
     run of each part (scene: the check's load, once per run; then worker.Clock's parts)."""
     from isaac.app.sweep import worker as work
-    from isaac.app.sweep.command import _prepare_out, _tasks
+    from isaac.app.sweep.command import _tasks
     from isaac.app.sweep.spec import load_runs, load_sweep
 
     sweep = load_sweep(path)
     indices = list(range(min(runs, sweep.n_runs)))
     with tempfile.TemporaryDirectory(prefix="isaac-bench-sweep-") as tmp:
-        _prepare_out(sweep, tmp)
+        work.prepare_out(sweep, tmp)
         work.warm_up([sweep.run_scene_text(0)], sweep.scene_path, sweep.scene_name, sweep.record)
         t0 = time.perf_counter()
         loaded = load_runs(sweep, indices)

@@ -104,6 +104,10 @@ def test_table_and_logs_are_the_same_with_one_and_two_workers_and_any_chunking(t
     first_worker = sorted(client.scheduler_info()["workers"])[0]
     with dask.annotate(workers=[first_worker], allow_other_workers=False):
         one = execute(str(sweep), str(tmp_path / "one"), client=client, chunk=7, plots=False)
+    # the default: chunks that shrink towards the end (_guided_chunks)
+    guided = execute(str(sweep), str(tmp_path / "guided"), client=client, plots=False)
+    assert _comparable(guided.table) == _comparable(two.table)
+    assert _log_bytes(guided.out) == _log_bytes(two.out)
     assert two.table.num_rows == one.table.num_rows == 40
     assert two.table.column("index").to_pylist() == list(range(40))
     assert _comparable(two.table) == _comparable(one.table)
@@ -128,6 +132,25 @@ def test_table_and_logs_are_the_same_with_one_and_two_workers_and_any_chunking(t
     assert "hist-final_com_x.png" in names and "hist-energy_drift.png" in names
     assert "final_com_x-vs-bodies.box.velocity.x.png" in names
     assert "hist-tunneled.png" not in names  # 0 in every run: no plot of a constant
+
+
+@pytest.mark.parametrize(
+    "runs, workers, least", [(1000, 2, 20), (1000, 1, 20), (100, 2, 1), (5, 4, 1)]
+)
+def test_guided_chunks_cover_every_run_once_in_order_and_shrink_to_the_least(runs, workers, least):
+    from isaac.app.sweep.command import MAX_CHUNK, TASKS_PER_WORKER, _guided_chunks
+
+    todo = list(range(3, 3 + runs))
+    chunks = _guided_chunks(todo, workers, least)
+    assert [i for c in chunks for i in c] == todo
+    sizes = [len(c) for c in chunks]
+    assert all(a >= b for a, b in zip(sizes, sizes[1:-1]))  # the very last may be a remainder
+    assert max(sizes) <= MAX_CHUNK and min(sizes[:-1], default=least) >= least
+    # each chunk is at most the runs left over TASKS_PER_WORKER x workers (or the least)
+    left = runs
+    for size in sizes:
+        assert size <= max(least, -(-left // (TASKS_PER_WORKER * workers)))
+        left -= size
 
 
 def test_resume_keeps_complete_runs_and_redoes_the_others(tmp_path, cluster):
@@ -436,6 +459,27 @@ def test_a_refusal_found_on_the_cluster_is_the_same_and_comes_before_anything(tm
     assert not (tmp_path / "out").exists()  # nothing ran or was written
 
 
+def test_an_output_folder_that_cannot_be_made_is_said_in_one_line_and_nothing_runs(
+    tmp_path, cluster
+):
+    # OUT is made on the cluster, by the task between the check and the runs: its error comes
+    # back as the sweep's own (exit 2), and no run starts
+    from isaac.app.sweep.spec import SweepError
+
+    _, client = cluster
+    sweep = _write(
+        tmp_path,
+        f"scene: {SCENES / 'bounce.yaml'}\nruns:\n  grid:\n"
+        "    bodies.box.restitution: [0.2, 0.4]\nrecord: none\n",
+    )
+    (tmp_path / "file").write_text("not a folder")
+    out = tmp_path / "file" / "out"
+    with pytest.raises(SweepError) as refused:
+        execute(str(sweep), str(out), client=client)
+    assert str(refused.value).startswith(f"{sweep}: cannot write --out {out}: ")
+    assert (tmp_path / "file").read_text() == "not a folder"
+
+
 RANDOM_BAD = [
     (
         "bad distribution",
@@ -583,8 +627,10 @@ def _children(pid: int) -> list[int]:
 
 @pytest.mark.slow
 def test_ctrl_c_stops_cleanly_and_the_same_command_resumes(tmp_path, cluster):
+    # runs long enough (1,500 steps, recorded) that the 40 cannot all finish between the third
+    # row seen here (polled every 0.2 s) and the interrupt
     sweep = _write(
-        tmp_path, BOUNCE_SWEEP.format(scene=SCENES / "bounce.yaml", steps=300, record="mcap")
+        tmp_path, BOUNCE_SWEEP.format(scene=SCENES / "bounce.yaml", steps=1500, record="mcap")
     )
     out = tmp_path / "out"
     cmd = [

@@ -11,11 +11,17 @@ Outline of `execute`:
             (`worker.load_chunk`); the first run refused stops the sweep before anything runs
             or is written, with the message the loader gives here. The loaded scenes stay on
             the workers for step 5: each run's scene is read once.
-4. warm up  the kernels of each distinct world setting compiled into numba's on-disk cache once
-            by one worker, then loaded by every worker at once, before the fan-out.
-5. fan out  OUT/ written; the same chunks as Dask tasks (`worker.run_chunk`), each next to its
-            loaded scenes; rows come back as chunks finish, with a progress bar over runs.
+4. warm up  one task (`worker.open_fan_out`) after every chunk's check: the kernels of each
+            distinct world setting compiled into numba's on-disk cache once, by one worker (the
+            others load them from there), and OUT/ written, unless a run was refused.
+5. fan out  the same chunks as Dask tasks (`worker.run_chunk`), each after step 4's task and
+            next to its loaded scenes; rows come back as chunks finish, with a progress bar.
 6. gather   runs.parquet (every row, by index), the PNG plots, and the summary.
+
+Steps 3 to 5 are one graph, sent at once: the workers go from the check to the runs without a
+round trip to this process, which on a small machine has no core of its own (docs/sweep-format.md,
+"Speed"). The chunks shrink towards the end of the runs (`_guided_chunks`), so that no worker
+waits long for the last chunk of another at the end of the check or of the fan-out.
 
 Ctrl-C (or SIGTERM) cancels the tasks, shuts the cluster down and writes the rows finished so
 far; running the same command again resumes.
@@ -38,10 +44,18 @@ from isaac.app.sweep.cluster import start_cluster
 from isaac.app.sweep.spec import Sweep, SweepError, load_runs, load_sweep, refusal
 from isaac.errors import IsaacError
 
-# runs per task at most: a task costs the scheduler about a millisecond, a small run less; a
+# runs per task at most: a chunk costs about 8 ms of CPU besides its runs (its check, summary
+# and run tasks, trivial ones timed on the 2-worker local cluster, 2026-12-02: 3 ms in this
+# process, which holds the scheduler, and 5 in the workers), a small run about 1.5 ms; a
 # rescheduled chunk redoes only its unfinished runs (their rows are on disk), so chunks may be big
-MAX_CHUNK = 100
-TASKS_PER_WORKER = 4  # at least this many tasks per worker while runs last (load balance)
+MAX_CHUNK = 250
+# chunk sizes shrink as the runs left do (guided self-scheduling): each chunk is the runs left
+# over TASKS_PER_WORKER x workers, so the last chunks, which decide how long the slowest worker
+# runs on alone at the end of the check and of the fan-out, are small
+TASKS_PER_WORKER = 2
+# ... but no smaller than this many body-steps (the base scene's bodies x steps a run): 20 runs
+# of a 2-body scene at 200 steps (about 30 ms), one run of a 100-body pile
+MIN_CHUNK_BODY_STEPS = 8_000
 MAX_WARM_UP = 8  # distinct world settings compiled before the fan-out (others as they come)
 # runs whose scenes are checked here before a local cluster is started, for at most this long:
 # where the line falls changes which process finds a refusal, never which run it names (the
@@ -68,8 +82,8 @@ class SweepResult:
     plots: list | None
     interrupted: bool = False
     # wall seconds of each step of `execute` (module docstring): read, cluster (started or
-    # reached), check, warm_up, runs (the fan-out, from the first task sent to the last row
-    # back), table, plots
+    # reached), check (until this process hears that step 4 is done, less its warm-up), warm_up
+    # (as timed by the worker), runs (the fan-out, from then to the last row back), table, plots
     phases: dict = field(default_factory=dict)
 
     @property
@@ -105,7 +119,10 @@ def register(subparsers) -> None:
         "--workers", type=int, metavar="N", help="local cluster size (default: one per core)"
     )
     p.add_argument(
-        "--chunk", type=int, metavar="K", help=f"runs per task (default: up to {MAX_CHUNK})"
+        "--chunk",
+        type=int,
+        metavar="K",
+        help=f"runs per task (default: up to {MAX_CHUNK}, fewer towards the end)",
     )
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.add_argument("--no-plots", action="store_true", help="write no PNG plots")
@@ -135,57 +152,28 @@ def run(sweep_path, out=None, *, client=None, scheduler=None, workers=None, chun
     return result.table
 
 
-def _check_out(sweep: Sweep, out: str) -> None:
-    """SweepError unless OUT is absent, empty, or holds this same sweep (then it is resumed).
-    Reads only."""
-    copy = os.path.join(out, "sweep.yaml")
-    scene_copy = os.path.join(out, "scene.yaml")
-    if os.path.lexists(out) and not os.path.isdir(out):
-        raise SweepError(f"--out {out} is not a folder", source=sweep.path)
-    if os.path.isdir(out) and os.listdir(out):
-        if not os.path.isfile(copy):
-            raise SweepError(
-                f"--out {out} is not empty and holds no sweep: choose an empty or new folder",
-                source=sweep.path,
-            )
-        for path, text, what in (
-            (copy, sweep.text, "sweep file"),
-            (scene_copy, sweep.scene_text, "scene"),
-        ):
-            try:
-                with open(path, encoding="utf-8") as f:
-                    same = f.read() == text
-            except OSError:
-                same = False
-            if not same:
-                raise SweepError(
-                    f"--out {out} holds a sweep of another {what} ({path} differs): resume "
-                    "only with the same files, or choose another folder",
-                    source=sweep.path,
-                )
-
-
-def _prepare_out(sweep: Sweep, out: str) -> None:
-    """Make OUT (checked by `_check_out` first) and copy the sweep file and its scene there."""
-    _check_out(sweep, out)
-    copy = os.path.join(out, "sweep.yaml")
-    scene_copy = os.path.join(out, "scene.yaml")
-    try:
-        for sub in ("", work.LOGS_DIR, work.TMP_DIR, work.ROWS_DIR):
-            os.makedirs(os.path.join(out, sub), exist_ok=True)
-        for path, text in ((copy, sweep.text), (scene_copy, sweep.scene_text)):
-            if not os.path.exists(path):
-                with open(path + ".tmp", "w", encoding="utf-8") as f:
-                    f.write(text)
-                os.replace(path + ".tmp", path)
-    except OSError as exc:
-        raise SweepError(
-            f"cannot write --out {out}: {exc.strerror or exc}", source=sweep.path
-        ) from None
-
-
 def _chunks(indices: list[int], size: int) -> list[list[int]]:
     return [indices[start : start + size] for start in range(0, len(indices), size)]
+
+
+def _guided_chunks(indices: list[int], n_workers: int, min_size: int) -> list[list[int]]:
+    """`indices` in chunks of (runs left) / (TASKS_PER_WORKER x n_workers) runs, at most
+    MAX_CHUNK and at least `min_size` (guided self-scheduling: big chunks first, small ones at
+    the end, where a worker that is done waits for the others)."""
+    out, start = [], 0
+    while start < len(indices):
+        left = len(indices) - start
+        size = max(min_size, min(MAX_CHUNK, math.ceil(left / (TASKS_PER_WORKER * n_workers))))
+        out.append(indices[start : start + size])
+        start += size
+    return out
+
+
+def _min_chunk(sweep: Sweep) -> int:
+    """Runs per chunk at least (MIN_CHUNK_BODY_STEPS of the base scene's bodies x steps)."""
+    steps = sweep.steps if sweep.steps is not None else sweep.scene.world.steps
+    body_steps = max(1, len(sweep.scene.bodies)) * max(1, steps)
+    return max(1, min(MAX_CHUNK, MIN_CHUNK_BODY_STEPS // body_steps))
 
 
 def _tasks(sweep: Sweep, chunks: list[list[int]], out: str) -> list[dict]:
@@ -246,7 +234,7 @@ def execute(
     from isaac.app.sweep import table as results  # pyarrow: imported when a sweep runs
 
     out = os.path.abspath(out)
-    _check_out(sweep, out)
+    work.check_out(sweep, out)
     schema = results.schema(sweep)
     kept = results.kept_rows(out, sweep.n_runs, schema) if os.path.isdir(out) else {}
     todo = [i for i in range(sweep.n_runs) if i not in kept]
@@ -268,7 +256,7 @@ def execute(
             phases,
         )
     else:
-        _prepare_out(sweep, out)
+        work.prepare_out(sweep, out)
     if interrupted:
         if not os.path.isfile(os.path.join(out, "sweep.yaml")):
             # stopped before anything ran: nothing to write
@@ -318,10 +306,10 @@ def execute(
     )
 
 
-def _check_on_cluster(client, sweep_f, sweep, todo_chunks, kept, checked) -> tuple[list, dict]:
-    """Step 3: (futures of the todo chunks' `load_chunk` results, kept on the workers; world
-    settings {repr: first run}). `checked`: runs 0 .. checked - 1 were checked already. SweepError
-    for the first run refused."""
+def _check_on_cluster(client, sweep_f, sweep, todo_chunks, kept, checked) -> tuple[list, list]:
+    """Step 3, submitted: (futures of the todo chunks' `load_chunk` results, kept on the
+    workers; futures of every chunk's `chunk_summary`). `checked`: runs 0 .. checked - 1 were
+    checked already."""
     keep = sweep.n_runs * len(sweep.scene.bodies) <= KEEP_SCENES_BODIES
     # the kept runs (a resume) are checked as well, past the ones checked here already
     others = [i for i in sorted(kept) if i >= checked]
@@ -333,16 +321,7 @@ def _check_on_cluster(client, sweep_f, sweep, todo_chunks, kept, checked) -> tup
     checks = client.map(
         work.load_chunk, other_chunks, [sweep_f] * m, [False] * m, pure=False, key="isaac-check"
     )
-    summaries = client.gather(client.map(work.chunk_summary, loads + checks, pure=False))
-    del checks
-    refused = [s["refused"] for s in summaries if s["refused"] is not None]
-    if refused:
-        raise refusal(sweep, min(refused))
-    worlds: dict = {}
-    for s in summaries:
-        for w, i in s["worlds"].items():
-            worlds[w] = min(i, worlds.get(w, i))
-    return loads, worlds
+    return loads, client.map(work.chunk_summary, loads + checks, pure=False)
 
 
 def _fan_out(sweep, todo, out, done, pre, client, scheduler, workers, chunk, progress, phases):
@@ -361,57 +340,90 @@ def _fan_out(sweep, todo, out, done, pre, client, scheduler, workers, chunk, pro
         if own:
             client, cluster = start_cluster(scheduler, workers)
         n_workers = max(1, len(client.scheduler_info().get("workers", {})))
-        size = chunk or max(
-            1, min(MAX_CHUNK, math.ceil(len(todo) / (n_workers * TASKS_PER_WORKER)))
-        )
-        chunks = _chunks(todo, size)
+        if chunk:
+            chunks = _chunks(todo, chunk)
+        else:
+            chunks = _guided_chunks(todo, n_workers, _min_chunk(sweep))
         sweep_f = client.scatter(sweep, broadcast=True, hash=False)
         phases["cluster"] = (t1 := time.perf_counter()) - t0
-        checked = len(pre["indices"])
-        loads, seen = _check_on_cluster(client, sweep_f, sweep, chunks, set(done), checked)
-        worlds = dict(pre["worlds"])
-        for w, i in seen.items():
-            worlds[w] = min(i, worlds.get(w, i))
-        phases["check"] = (t0 := time.perf_counter()) - t1
-        warm = [sweep.run_scene_text(i) for i in sorted(worlds.values())[:MAX_WARM_UP]]
-        warm_args = (warm, sweep.scene_path, sweep.scene_name, sweep.record)
-        # one worker fills numba's on-disk cache (which the workers of one machine share; this
-        # process need not load the engine at all), then each worker process loads the kernels
-        # from it, all at once, rather than each compiling them inside its first run
-        client.submit(work.warm_up, *warm_args, pure=False).result()
-        client.run(work.warm_up, *warm_args)
-        _prepare_out(sweep, out)
-        phases["warm_up"] = (t1 := time.perf_counter()) - t0
+        # the whole graph at once: the checks, then one task that says whether every run's
+        # scene was accepted and, if so, warms up the kernels and makes OUT (steps 3 and 4,
+        # `worker.open_fan_out`), then the runs, which depend on it: they start as soon as it
+        # is done, without waiting for this process, and do nothing if a run was refused
+        loads, summaries = _check_on_cluster(
+            client, sweep_f, sweep, chunks, set(done), len(pre["indices"])
+        )
+        gate = client.submit(
+            work.open_fan_out,
+            sweep_f,
+            out,
+            pre["worlds"],
+            MAX_WARM_UP,
+            *summaries,
+            pure=False,
+            key="isaac-open",
+        )
+        del summaries
         tasks = _tasks(sweep, chunks, out)
+        futures = client.map(
+            work.run_chunk,
+            tasks,
+            [sweep_f] * len(tasks),
+            loads,
+            [gate] * len(tasks),
+            pure=False,
+            key="isaac-run",
+        )
+        futures.append(gate)  # cancelled with the runs
+        del loads  # each chunk's scenes go from the worker with its run task
+        opened = gate.result()
+        if opened.get("refused") is not None:
+            raise refusal(sweep, opened["refused"])
+        if opened.get("error") is not None:
+            raise SweepError(opened["error"], source=sweep.path)
+        t0 = time.perf_counter()
+        phases["check"] = t0 - t1 - opened["warm_up_s"]
+        phases["warm_up"] = opened["warm_up_s"]
+        t1 = t0
         if progress:
             from tqdm import tqdm
 
             bar = tqdm(total=sweep.n_runs, initial=len(done), unit="run", desc=sweep.scene_name)
-        futures = client.map(
-            work.run_chunk, tasks, [sweep_f] * len(tasks), loads, pure=False, key="isaac-run"
-        )
-        by_future = {f.key: k for k, f in enumerate(futures)}
-        del loads  # each chunk's scenes go from the worker with its run task
-        for future in as_completed(futures):
-            task = tasks[by_future[future.key]]
-            try:
-                rows = future.result()
-            except Exception as exc:  # noqa: BLE001 - e.g. KilledWorker: the chunk's runs fail
-                message = " ".join(f"{type(exc).__name__}: {exc}".split())
-                written = {
-                    r["index"]: r
-                    for r in work.read_rows(work.rows_path(out, task["runs"][0]))
-                    if work.row_is_complete(out, r)
-                }
-                rows = [
-                    written.get(i)
-                    or {"index": i, **sweep.params(i), "status": "failed", "error": message}
-                    for i in task["runs"]
-                ]
+        by_future = {f.key: k for k, f in enumerate(futures[:-1])}
+        # the rows stay on the workers until every chunk is done and then come in one gather
+        # (a message per worker): fetching each chunk's rows as it finished cost this process
+        # and the workers about 2.5 ms of CPU a chunk, taken from the runs on a 2-core machine
+        finished = []
+        for future in as_completed(futures[:-1]):
+            finished.append(future)
+            if bar is not None:
+                bar.update(len(tasks[by_future[future.key]]["runs"]))
+        ok = [f for f in finished if f.status == "finished"]
+        for rows in client.gather(ok, errors="skip"):
             for row in rows:
                 done[row["index"]] = row
-            if bar is not None:
-                bar.update(len(rows))
+        for future in finished:
+            task = tasks[by_future[future.key]]
+            if all(i in done for i in task["runs"]):
+                continue
+            # e.g. KilledWorker: the chunk's unfinished runs fail
+            if future.status == "error":
+                exc = future.exception()
+                message = " ".join(f"{type(exc).__name__}: {exc}".split())
+            else:
+                message = "the chunk's rows were lost with its worker"
+            written = {
+                r["index"]: r
+                for r in work.read_rows(work.rows_path(out, task["runs"][0]))
+                if work.row_is_complete(out, r)
+            }
+            for i in task["runs"]:
+                done[i] = written.get(i) or {
+                    "index": i,
+                    **sweep.params(i),
+                    "status": "failed",
+                    "error": message,
+                }
         phases["runs"] = time.perf_counter() - t1
     except KeyboardInterrupt:
         interrupted = True

@@ -15,7 +15,8 @@ A run's files, in the sweep's output folder:
 Where a run's time goes is what shapes this module (docs/sweep-format.md, "Speed"): a small run
 simulates in well under a millisecond, so everything per run besides the simulation is kept
 small. Each run's scene is loaded once, by the task that checked it (`load_chunk`, whose
-result Dask keeps on the worker for the chunk's `run_chunk`); the whole run is one compiled
+result Dask keeps on the worker for the chunk's `run_chunk`, or sends to the worker that runs
+the chunk: a few ms for 100 small scenes); the whole run is one compiled
 batch of steps (`batch_size`); its row is one appended line, not a file. The recorder writes in
 this process (``offload="none"``): one writer process per run would cost more than a small run.
 """
@@ -94,6 +95,59 @@ def read_rows(path: str) -> list[dict]:
     return rows
 
 
+def check_out(sweep, out: str) -> None:
+    """SweepError unless OUT is absent, empty, or holds this same sweep (then it is resumed).
+    Reads only."""
+    from isaac.app.sweep.spec import SweepError
+
+    copy = os.path.join(out, "sweep.yaml")
+    scene_copy = os.path.join(out, "scene.yaml")
+    if os.path.lexists(out) and not os.path.isdir(out):
+        raise SweepError(f"--out {out} is not a folder", source=sweep.path)
+    if os.path.isdir(out) and os.listdir(out):
+        if not os.path.isfile(copy):
+            raise SweepError(
+                f"--out {out} is not empty and holds no sweep: choose an empty or new folder",
+                source=sweep.path,
+            )
+        for path, text, what in (
+            (copy, sweep.text, "sweep file"),
+            (scene_copy, sweep.scene_text, "scene"),
+        ):
+            try:
+                with open(path, encoding="utf-8") as f:
+                    same = f.read() == text
+            except OSError:
+                same = False
+            if not same:
+                raise SweepError(
+                    f"--out {out} holds a sweep of another {what} ({path} differs): resume "
+                    "only with the same files, or choose another folder",
+                    source=sweep.path,
+                )
+
+
+def prepare_out(sweep, out: str) -> None:
+    """Make OUT (checked by `check_out` first) and copy the sweep file and its scene there."""
+    from isaac.app.sweep.spec import SweepError
+
+    check_out(sweep, out)
+    copy = os.path.join(out, "sweep.yaml")
+    scene_copy = os.path.join(out, "scene.yaml")
+    try:
+        for sub in ("", LOGS_DIR, TMP_DIR, ROWS_DIR):
+            os.makedirs(os.path.join(out, sub), exist_ok=True)
+        for path, text in ((copy, sweep.text), (scene_copy, sweep.scene_text)):
+            if not os.path.exists(path):
+                with open(path + ".tmp", "w", encoding="utf-8") as f:
+                    f.write(text)
+                os.replace(path + ".tmp", path)
+    except OSError as exc:
+        raise SweepError(
+            f"cannot write --out {out}: {exc.strerror or exc}", source=sweep.path
+        ) from None
+
+
 class _RowFile:
     """The row file of one chunk, opened for appending on the first row."""
 
@@ -169,16 +223,61 @@ def chunk_summary(loaded: dict) -> dict:
     return {k: loaded[k] for k in ("indices", "refused", "worlds")}
 
 
+_WARMED: set = set()  # (world settings repr, record mode) warmed up by `open_fan_out` here
+
+
+def open_fan_out(sweep, out: str, pre_worlds: dict, max_warm_up: int, *summaries: dict) -> dict:
+    """The step between the check and the fan-out, one task on one worker (the run tasks depend
+    on it: they start when it is done, without a round trip to the client), from the chunks'
+    `chunk_summary` results and the world settings of the runs checked by the client
+    (`pre_worlds`):
+
+    - a run refused: {"refused": its index}; nothing is written (the runs do nothing);
+    - else the kernels of the first `max_warm_up` distinct world settings compiled into numba's
+      on-disk cache (shared by the workers of one machine: the others load them from there in
+      their first run, rather than each compiling them), OUT made and the sweep file and its
+      scene copied there: {"ok": True, "warm_up_s": seconds}, or {"error": why OUT cannot be
+      written}."""
+    from isaac.app.sweep.spec import SweepError
+
+    refused = [s["refused"] for s in summaries if s["refused"] is not None]
+    if refused:
+        return {"refused": min(refused)}
+    worlds = dict(pre_worlds)
+    for s in summaries:
+        for w, i in s["worlds"].items():
+            worlds[w] = min(i, worlds.get(w, i))
+    t0 = time.perf_counter()
+    first = sorted((i, w) for w, i in worlds.items())[:max_warm_up]
+    # a world setting this process has warmed up before (an earlier sweep on this cluster) has
+    # its kernels in the on-disk cache already
+    cold = [(i, w) for i, w in first if (w, sweep.record) not in _WARMED]
+    warm = [sweep.run_scene_text(i) for i, _ in cold]
+    warm_up(warm, sweep.scene_path, sweep.scene_name, sweep.record)
+    _WARMED.update((w, sweep.record) for _, w in cold)
+    warm_up_s = time.perf_counter() - t0
+    try:
+        prepare_out(sweep, out)
+    except SweepError as exc:
+        return {"error": exc.what}
+    return {"ok": True, "warm_up_s": warm_up_s}
+
+
 def batch_size(steps: int, n_bodies: int) -> int:
     """Steps per compiled call: the whole run for small scenes, capped so that a batch's
     records hold at most BATCH_BODY_STEPS body-steps."""
     return max(1, min(steps, BATCH_BODY_STEPS // max(1, n_bodies)))
 
 
-def run_chunk(task: dict, sweep, loaded: dict | None = None, clock=None) -> list[dict]:
+def run_chunk(
+    task: dict, sweep, loaded: dict | None = None, opened: dict | None = None, clock=None
+) -> list[dict]:
     """The rows of the runs of `task` (see `isaac.app.sweep.command._tasks`), in order.
     `loaded`: the chunk's `load_chunk` result (scenes and table values), else each run's scene
-    is loaded here. `clock`: a `Clock` that times the parts of each run."""
+    is loaded here. `opened`: `open_fan_out`'s result; nothing is run (no rows) unless it is
+    ok. `clock`: a `Clock` that times the parts of each run."""
+    if opened is not None and not opened.get("ok"):
+        return []
     clock = clock or _NoClock()
     out_dir, first = task["out"], task["runs"][0]
     path = rows_path(out_dir, first)
