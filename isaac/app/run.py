@@ -186,6 +186,22 @@ def _start_writers(offload: str, claims: dict) -> dict:
     return children
 
 
+def _say_if_compiling(scene) -> None:
+    """One line on stderr when numba's cache lacks the step's kernels (the first run on a
+    machine, or after the engine changed): the run then compiles them before its first step,
+    which took 11-13 s for the stages and 19 s more for the compiled driver on the 2-core
+    machine at load 2-3 (bench/README.md), where a new user would otherwise see nothing."""
+    from isaac.engine.compile_ahead import is_cold, solver_kernel
+    from isaac.engine.step import StepSettings
+
+    if is_cold(solver_kernel(StepSettings.of(scene.world))):
+        print(
+            "compiling the engine's kernels into numba's cache before the first step (a first "
+            "run takes 15-40 s; later runs load them in under a second)",
+            file=sys.stderr,
+        )
+
+
 def cmd_run(args: argparse.Namespace) -> int:
     started = time.perf_counter()
     scene = load_scene(args.scene)
@@ -201,6 +217,8 @@ def cmd_run(args: argparse.Namespace) -> int:
         # imported here, after the writers started: compiling kernels is not needed for --help
         from isaac.engine.simulation import Simulation
 
+        if not args.quiet:
+            _say_if_compiling(scene)
         sim = Simulation(scene, profile=args.profile)  # --profile: the timed driver
     except BaseException:
         for child in children.values():
