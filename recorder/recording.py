@@ -103,7 +103,14 @@ class Recorder:
                 from recorder.writer_process import choose_offload
 
                 offload = choose_offload((mcap_path is not None) + (rrd_path is not None))
-            self.offload = _describe_offload(offload, self._children, mcap_path, rrd_path)
+            # each file's mode: "process" for those whose writer process was started
+            # beforehand, ``offload`` for the others
+            self._modes = {
+                k: "process" if k in self._children else offload
+                for k, p in (("mcap", mcap_path), ("rrd", rrd_path))
+                if p is not None
+            }
+            self.offload = _describe_offload(self._modes, offload)
             self._claim(mcap_path, rrd_path, replace_partial)
         except BaseException:
             for c in (mcap_path, rrd_path):
@@ -155,16 +162,14 @@ class Recorder:
         if mcap is not None:
             self.mcap = self._mcap_writer(
                 mcap.path,
-                "process" if "mcap" in self._children else offload,
+                self._modes["mcap"],
                 compression,
                 flush_every,
                 foxglove,
                 impulse_scale,
             )
         if rrd is not None:
-            self.rerun = self._rerun_writer(
-                rrd.path, "process" if "rrd" in self._children else offload, impulse_scale
-            )
+            self.rerun = self._rerun_writer(rrd.path, self._modes["rrd"], impulse_scale)
 
     def _claim(self, mcap_path, rrd_path, replace_partial: bool) -> None:
         paths = {"mcap_path": mcap_path, "rrd_path": rrd_path}
@@ -457,11 +462,9 @@ def _same_state(a: StepRecord, b: StepRecord) -> bool:
     )
 
 
-def _describe_offload(offload: str, children: dict, mcap_path, rrd_path) -> str:
+def _describe_offload(modes: dict, offload: str) -> str:
     """`Recorder.offload`: the mode of every writer, or each file's when they differ
     ("rrd process, mcap thread": the Rerun recording by a process started beforehand)."""
-    outputs = [k for k, p in (("mcap", mcap_path), ("rrd", rrd_path)) if p is not None]
-    modes = {k: "process" if k in children else offload for k in outputs}
     if len(set(modes.values())) <= 1:
         return next(iter(modes.values()), offload)
-    return ", ".join(f"{k} {modes[k]}" for k in sorted(outputs, key=lambda k: k != "rrd"))
+    return ", ".join(f"{k} {modes[k]}" for k in sorted(modes, key=lambda k: k != "rrd"))

@@ -158,11 +158,7 @@ def solve_sequential(
     # the velocities into each moving body's first unit and every unit side with a concrete body
     _to_first_units(t, first, v)
     for f in range(fixed.shape[0]):
-        at = fixed[f]
-        body = fixed_body[f]
-        t[at] = v[body, 0]
-        t[at + LANES] = v[body, 1]
-        t[at + 2 * LANES] = v[body, 2]
+        _put_velocity(t, fixed[f], v, fixed_body[f])
 
     if n_joints == 0:
         run_passes(t, kind, successor, groups, iterations)
@@ -215,21 +211,15 @@ def solve_sequential(
 @numba.njit(cache=True, nogil=True, inline="always")
 def _to_first_units(t, first, v):
     for body in range(v.shape[0]):
-        at = first[body]
-        if at >= 0:
-            t[at] = v[body, 0]
-            t[at + LANES] = v[body, 1]
-            t[at + 2 * LANES] = v[body, 2]
+        if first[body] >= 0:
+            _put_velocity(t, first[body], v, body)
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
 def _from_first_units(t, first, v):
     for body in range(v.shape[0]):
-        at = first[body]
-        if at >= 0:
-            v[body, 0] = t[at]
-            v[body, 1] = t[at + LANES]
-            v[body, 2] = t[at + 2 * LANES]
+        if first[body] >= 0:
+            _get_velocity(t, first[body], v, body)
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
@@ -252,22 +242,30 @@ def _bodies_with_units(first):
 def _to_units(t, first, v, units):
     """`_to_first_units` for the bodies `units` (`_bodies_with_units`)."""
     for u in range(units.shape[0]):
-        body = units[u]
-        at = first[body]
-        t[at] = v[body, 0]
-        t[at + LANES] = v[body, 1]
-        t[at + 2 * LANES] = v[body, 2]
+        _put_velocity(t, first[units[u]], v, units[u])
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
 def _from_units(t, first, v, units):
     """`_from_first_units` for the bodies `units` (`_bodies_with_units`)."""
     for u in range(units.shape[0]):
-        body = units[u]
-        at = first[body]
-        v[body, 0] = t[at]
-        v[body, 1] = t[at + LANES]
-        v[body, 2] = t[at + 2 * LANES]
+        _get_velocity(t, first[units[u]], v, units[u])
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _put_velocity(t, at, v, body):
+    """A body's (vx, vy, w) into a unit side's velocity columns at ``at`` of table t."""
+    t[at] = v[body, 0]
+    t[at + LANES] = v[body, 1]
+    t[at + 2 * LANES] = v[body, 2]
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _get_velocity(t, at, v, body):
+    """The velocity columns at ``at`` of table t back into a body's (vx, vy, w)."""
+    v[body, 0] = t[at]
+    v[body, 1] = t[at + LANES]
+    v[body, 2] = t[at + 2 * LANES]
 
 
 @numba.njit(cache=True, nogil=True)
