@@ -152,7 +152,7 @@ def run(scene_name: str, preset: str, out_dir: str, reps: int, steps: int) -> di
     else:
         for mode, module, key in (
             ("mcap", "recorder.mcap_writer", "mcap_path"),
-            ("rerun", "recorder.rerun_writer", "rrd_path"),
+            ("rerun", "recorder.rerun_send", "rrd_path"),
         ):
             why = _available(module)
             if why:

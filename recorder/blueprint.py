@@ -22,9 +22,16 @@ into the summary in words.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
-import rerun as rr
-import rerun.blueprint as rrb
+if TYPE_CHECKING:
+    import rerun as rr
+    import rerun.blueprint as rrb
+
+# rerun-sdk is imported inside the functions that build its objects: the constants below are
+# also read by the drawing half of the writer (`recorder.rerun_writer`), which runs in the
+# simulating process and must not pay for importing rerun (0.4-0.5 s of CPU); only the process
+# that sends (`recorder.rerun_send`) calls the functions
 
 
 @dataclass(frozen=True)
@@ -56,6 +63,19 @@ LEGEND = (MOVING, CONCRETE, CONTACT, NORMAL, IMPULSE, PUSH, JOINT, ANCHOR)
 
 BACKGROUND = (250, 250, 247)  # the 2D view's, near white
 
+# the `/stats` values as the Rerun recording holds them (``stats/<name>``), in this order in
+# every stats row the writer buffers and sends
+STAT_NAMES = (
+    "kinetic_energy",
+    "potential_energy",
+    "total_energy",
+    "linear_momentum_x",
+    "linear_momentum_y",
+    "angular_momentum",
+    "contact_count",
+    "max_depth",
+    "max_impulse",
+)
 ENERGIES = ("kinetic_energy", "potential_energy", "total_energy")
 # the other /stats series, one tab per unit: (tab name, series)
 OTHER_STATS = (
@@ -92,6 +112,8 @@ WORLD_SHARE = 3  # the 2D view's share of the width, against 1 for the plots and
 
 def annotation_context() -> rr.AnnotationContext:
     """The legend as Rerun annotations: class id -> label and colour (logged on ``world``)."""
+    import rerun as rr
+
     return rr.AnnotationContext(
         [rr.AnnotationInfo(id=k.class_id, label=k.label, color=k.rgb) for k in LEGEND]
     )
@@ -99,6 +121,8 @@ def annotation_context() -> rr.AnnotationContext:
 
 def series_style(name: str) -> rr.SeriesLines:
     """How the ``stats/<name>`` series is drawn: its colour and a name with its unit."""
+    import rerun as rr
+
     return rr.SeriesLines(
         colors=[SERIES_COLOURS[name]], names=[f"{name} ({SERIES_UNITS[name]})"], widths=[1.5]
     )
@@ -114,6 +138,8 @@ def legend_markdown(joints: bool = True) -> str:
 
 
 def _series_view(name: str, series, origin: str = "/stats") -> rrb.TimeSeriesView:
+    import rerun.blueprint as rrb
+
     return rrb.TimeSeriesView(
         origin=origin,
         contents=[f"{origin}/{s}" for s in series],
@@ -124,6 +150,8 @@ def _series_view(name: str, series, origin: str = "/stats") -> rrb.TimeSeriesVie
 
 def blueprint() -> rrb.Blueprint:
     """The layout every ISAAC recording opens in (see the module docstring)."""
+    import rerun.blueprint as rrb
+
     world = rrb.Spatial2DView(
         origin="/",
         contents="/world/**",

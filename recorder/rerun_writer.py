@@ -25,17 +25,15 @@ Positions are float32 in Rerun: exact values live in the MCAP log only.
 
 from __future__ import annotations
 
-import os
 import queue
 import threading
 
 import numpy as np
-import pyarrow as pa
-import rerun as rr
 
 from isaac.engine.records import CONTACT_FIELDS, StepRecord
 from isaac.errors import LogError
 from recorder import blueprint
+from recorder.blueprint import STAT_NAMES
 from recorder.pack import batch_state, model_bundle
 from recorder.rerun_batch import (
     AT_JOINTS,
@@ -55,22 +53,7 @@ from recorder.rerun_batch import (
 )
 from recorder.shapes import drawn_shapes, joint_geometry
 
-APP_ID = "isaac"
-STAT_NAMES = (
-    "kinetic_energy",
-    "potential_energy",
-    "total_energy",
-    "linear_momentum_x",
-    "linear_momentum_y",
-    "angular_momentum",
-    "contact_count",
-    "max_depth",
-    "max_impulse",
-)
-
-# a scene with more moving bodies than this gets their labels on hover only (drawn, they hide
-# the scene)
-LABELS_DRAWN_UP_TO = 12
+__all__ = ["STAT_NAMES", "PUSH_SCALE", "RerunLogWriter", "default_scales", "mcap_to_rrd"]
 
 
 def default_scales(model) -> tuple[float, float]:
@@ -97,52 +80,6 @@ def default_scales(model) -> tuple[float, float]:
 # (the default scene's pushes are 3e-6 to 5e-3 m, its bodies about 0.4 m across) and only
 # appeared as bodies landed; at rest they are zero and none are drawn.
 PUSH_SCALE = 50.0
-
-
-_STRIP_TYPE = rr.components.LineStrip2DBatch._ARROW_DATATYPE
-
-
-def _strips_arrow(points: np.ndarray, lengths: np.ndarray) -> pa.Array:
-    """Strips of ``lengths`` points each, one after the other in ``points`` (float32, (p, 2)),
-    as Rerun's LineStrip2D arrow array, built in one go.
-
-    Rerun's own conversion walks the strips in Python (one call per strip); this builds the
-    same array (list of fixed-size [x, y] float32 lists) from offsets and one flat buffer.
-    """
-    flat = pa.array(np.ascontiguousarray(points, dtype=np.float32).reshape(-1))
-    inner = pa.FixedSizeListArray.from_arrays(flat, type=_STRIP_TYPE.value_type)
-    offsets = np.zeros(len(lengths) + 1, dtype=np.int32)
-    np.cumsum(lengths, out=offsets[1:])
-    return pa.ListArray.from_arrays(pa.array(offsets), inner, type=_STRIP_TYPE)
-
-
-def _column(descriptor, batch_type, values: pa.Array, counts: np.ndarray) -> rr.ComponentColumn:
-    """A `send_columns` column of ``values`` (arrow, already of ``batch_type``'s type) with
-    ``counts[k]`` of them at step k: what ``rr.<Archetype>.columns(...).partition(counts)``
-    builds, without Rerun converting the data again in Python."""
-    offsets = np.zeros(len(counts) + 1, dtype=np.int32)
-    np.cumsum(counts, out=offsets[1:])
-    return rr.ComponentColumn(descriptor, batch_type(values), offsets=offsets)
-
-
-def _time_columns(steps: list[int], sim_times: list[float]) -> list[rr.TimeColumn]:
-    """The ``step`` and ``sim_time`` (s) time columns of a batch's steps, converted in one go:
-    ``sim_time`` as integer nanoseconds rounded as `rr.set_time` rounds a float of seconds
-    (Rerun's own conversion of a float array truncates; of a list, a Python call a step)."""
-    nanos = np.rint(np.asarray(sim_times, dtype=np.float64) * 1e9).astype(np.int64)
-    return [
-        rr.TimeColumn("step", sequence=np.asarray(steps, dtype=np.int64)),
-        rr.TimeColumn("sim_time", duration=nanos.astype("timedelta64[ns]")),
-    ]
-
-
-def _vec2(points: np.ndarray) -> pa.Array:
-    """(k, 2) float32 as Rerun's Vec2D arrow array (fixed-size lists of 2), without a copy."""
-    return pa.FixedSizeListArray.from_arrays(pa.array(points.reshape(-1)), type=_VEC2_TYPE)
-
-
-_VEC2_TYPE = rr.components.Position2DBatch._ARROW_DATATYPE
-assert _VEC2_TYPE == rr.components.Vector2DBatch._ARROW_DATATYPE
 
 
 def _load_kernels() -> None:
@@ -215,6 +152,9 @@ class RerunLogWriter:
     joints: the joint table (rows with a, b, local_a, local_b; `recorder.shapes.joint_geometry`),
         default ``model.joints``: each joint is drawn as a line between its bodies' anchors,
         the anchors marked (a revolute joint's coincide: its pivot).
+    sender: what makes the object that does the ``rr.*`` calls, called with the ``.partial``
+        path, the recording id and the drawing scales; default `recorder.rerun_send.RerunSender`
+        (rerun-sdk in this process); `isaac run` passes a `RerunSendProcess`'s ``open``.
     """
 
     def __init__(
@@ -229,6 +169,7 @@ class RerunLogWriter:
         batch: int = 100,
         background: bool = False,
         joints=None,
+        sender=None,
     ) -> None:
 
         self.path = str(path)
@@ -271,81 +212,19 @@ class RerunLogWriter:
         self._queue: queue.Queue | None = None
         self._thread: threading.Thread | None = None
 
-        self.rec = rr.RecordingStream(APP_ID, recording_id=f"isaac-{scene.name}")
-        self.rec.save(self.partial_path)
-        rec = self.rec
-        # the layout (recorder.blueprint), made active: the same on every load
-        rec.send_blueprint(blueprint.blueprint(), make_active=True, make_default=True)
-        rec.log("world", rr.Transform3D(scale=[1.0, -1.0, 1.0]), static=True)
-        rec.log("world", blueprint.annotation_context(), static=True)
-        # colours come from the annotation context through the class ids (one per entity)
-        many = int(np.sum(self._not_concrete)) > LABELS_DRAWN_UP_TO
-        rec.log(
-            "world/bodies/moving",
-            rr.LineStrips2D.from_fields(
-                class_ids=[blueprint.MOVING.class_id],
-                radii=[-1.5],
-                draw_order=10.0,
-                show_labels=False if many else None,
-            ),
-            static=True,
+        # the recording stream, its layout and static entities (recorder.rerun_send): in this
+        # process, or in the sender process `isaac run` started (RerunSendProcess.open)
+        if sender is None:
+            from recorder.rerun_send import RerunSender as sender
+        self._sender = sender(
+            self.partial_path,
+            f"isaac-{scene.name}",
+            impulse_scale=self.impulse_scale,
+            normal_length=self.normal_length,
+            push_scale=self.push_scale,
+            joints=self.joint_count > 0,
+            moving=self._moving_count,
         )
-        # the overlays' class labels stay off: drawn beside every point or arrow of a step
-        # with few of them, they covered small bodies (the car's wheels); hovering names them
-        rec.log(
-            "world/contacts",
-            rr.Points2D.from_fields(
-                class_ids=[blueprint.CONTACT.class_id],
-                radii=[-2.5],
-                draw_order=40.0,
-                show_labels=False,
-            ),
-            static=True,
-        )
-        for kind in (blueprint.NORMAL, blueprint.IMPULSE, blueprint.PUSH):
-            rec.log(
-                f"world/{kind.entity}",
-                rr.Arrows2D.from_fields(
-                    class_ids=[kind.class_id],
-                    radii=[-1.5 if kind is blueprint.PUSH else -1.0],
-                    draw_order=30.0 if kind is blueprint.PUSH else 20.0,
-                    show_labels=False,
-                ),
-                static=True,
-            )
-        if self.joint_count:
-            # above the bodies' outlines, below the contact arrows and points
-            rec.log(
-                f"world/{blueprint.JOINT.entity}",
-                rr.LineStrips2D.from_fields(
-                    class_ids=[blueprint.JOINT.class_id],
-                    radii=[-2.0],
-                    draw_order=25.0,
-                    show_labels=False,
-                ),
-                static=True,
-            )
-            rec.log(
-                f"world/{blueprint.ANCHOR.entity}",
-                rr.Points2D.from_fields(
-                    class_ids=[blueprint.ANCHOR.class_id],
-                    radii=[-4.0],
-                    draw_order=35.0,
-                    show_labels=False,
-                ),
-                static=True,
-            )
-        rec.log(
-            "world/impulses",
-            rr.AnyValues(
-                impulse_scale_m_per_Ns=self.impulse_scale,
-                normal_length_m=self.normal_length,
-                push_scale=self.push_scale,
-            ),
-            static=True,
-        )
-        for name in STAT_NAMES:
-            rec.log(f"stats/{name}", blueprint.series_style(name), static=True)
         self._log_info()
         if background:
             # two batches in flight at most (a few MB each); a third waits for the first
@@ -394,11 +273,7 @@ class RerunLogWriter:
             "(as in `isaac inspect LOG --step K`)",
             "- positions here are float32; exact float64 values: the MCAP log",
         ]
-        self.rec.log(
-            "info",
-            rr.TextDocument("\n".join(lines) + "\n", media_type=rr.MediaType.MARKDOWN),
-            static=True,
-        )
+        self._sender.info("\n".join(lines) + "\n")
 
     def _label(self, k: int) -> str:
         """A body's label: its log index and name (the strips' instance index is not the body
@@ -516,16 +391,9 @@ class RerunLogWriter:
         """The concrete bodies' outlines, once, at their first step's poses."""
         concrete = self.concrete & exists
         if np.any(concrete):
-            self.rec.log(
-                "world/bodies/concrete",
-                rr.LineStrips2D(
-                    self._outlines(angle, position, concrete),
-                    radii=[-3.0],
-                    labels=[self._label(k) for k in np.flatnonzero(concrete)],
-                    class_ids=[blueprint.CONCRETE.class_id],
-                    draw_order=5.0,
-                ),
-                static=True,
+            self._sender.concrete(
+                self._outlines(angle, position, concrete),
+                [self._label(k) for k in np.flatnonzero(concrete)],
             )
         self._static_done = True
 
@@ -535,12 +403,7 @@ class RerunLogWriter:
         key = moving.tobytes()
         if key == self._last_labels_key:
             return
-        self.rec.set_time("step", sequence=int(step))
-        self.rec.set_time("sim_time", duration=float(time))
-        self.rec.log(
-            "world/bodies/moving",
-            rr.LineStrips2D.from_fields(labels=[self._label(k) for k in np.flatnonzero(moving)]),
-        )
+        self._sender.labels(step, time, [self._label(k) for k in np.flatnonzero(moving)])
         self._last_labels_key = key
 
     def append(
@@ -695,119 +558,12 @@ class RerunLogWriter:
         stats,
         stats_rows,
     ) -> None:
-        """Send one batch (the arrays `_send` took): outlines, contacts, arrows, joints, stats."""
-        rec = self.rec
-        count = len(steps)
-        times = _time_columns(steps, sim_times)
-        rec.send_columns(
-            "world/bodies/moving",
-            indexes=times,
-            columns=[
-                _column(
-                    rr.LineStrips2D.descriptor_strips(),
-                    rr.components.LineStrip2DBatch,
-                    _strips_arrow(strips, lengths),
-                    strip_counts,
-                )
-            ],
-        )
-        points = _vec2(points)
-        rec.send_columns(
-            "world/contacts",
-            indexes=times,
-            columns=[
-                _column(
-                    rr.Points2D.descriptor_positions(),
-                    rr.components.Position2DBatch,
-                    points,
-                    counts,
-                )
-            ],
-        )
-        # the order Arrows2D.columns gives: vectors, then origins
-        for entity, vectors in (("world/normals", normals), ("world/impulses", impulses)):
-            rec.send_columns(
-                entity,
-                indexes=times,
-                columns=[
-                    _column(
-                        rr.Arrows2D.descriptor_vectors(),
-                        rr.components.Vector2DBatch,
-                        _vec2(vectors),
-                        counts,
-                    ),
-                    _column(
-                        rr.Arrows2D.descriptor_origins(),
-                        rr.components.Position2DBatch,
-                        points,
-                        counts,
-                    ),
-                ],
-            )
-        rec.send_columns(
-            "world/push",
-            indexes=times,
-            columns=[
-                _column(
-                    rr.Arrows2D.descriptor_vectors(),
-                    rr.components.Vector2DBatch,
-                    _vec2(push_v),
-                    push_counts,
-                ),
-                _column(
-                    rr.Arrows2D.descriptor_origins(),
-                    rr.components.Position2DBatch,
-                    _vec2(push_pt),
-                    push_counts,
-                ),
-            ],
-        )
-        if self.joint_count:
-            # each joint a 2-point strip from a's anchor to b's; the anchors as points
-            rec.send_columns(
-                f"world/{blueprint.JOINT.entity}",
-                indexes=times,
-                columns=[
-                    _column(
-                        rr.LineStrips2D.descriptor_strips(),
-                        rr.components.LineStrip2DBatch,
-                        _strips_arrow(joints, np.full(len(joints) // 2, 2, dtype=np.int32)),
-                        joint_counts,
-                    )
-                ],
-            )
-            rec.send_columns(
-                f"world/{blueprint.ANCHOR.entity}",
-                indexes=times,
-                columns=[
-                    _column(
-                        rr.Points2D.descriptor_positions(),
-                        rr.components.Position2DBatch,
-                        _vec2(joints),
-                        2 * joint_counts,
-                    )
-                ],
-            )
-        if stats_rows:
-            stat_times = times
-            if len(stats_rows) < count:  # some steps came without stats
-                stat_times = _time_columns(
-                    [steps[k] for k in stats_rows], [sim_times[k] for k in stats_rows]
-                )
-            ones = np.ones(len(stats_rows), dtype=np.int64)
-            for j, name in enumerate(STAT_NAMES):
-                rec.send_columns(
-                    f"stats/{name}",
-                    indexes=stat_times,
-                    columns=[
-                        _column(
-                            rr.Scalars.descriptor_scalars(),
-                            rr.components.ScalarBatch,
-                            pa.array(stats[:, j].copy()),
-                            ones,
-                        )
-                    ],
-                )
+        """Send one batch (the arrays `_send` took): outlines, contacts, arrows, joints, stats
+        (`recorder.rerun_send.RerunSender.batch`)."""
+        self._sender.batch(
+            steps, sim_times, strips, lengths, strip_counts, points, normals, impulses, counts,
+            push_pt, push_v, push_counts, joints, joint_counts, stats, stats_rows,
+        )  # fmt: skip
 
     def _work(self) -> None:
         """The sender thread: batches in order; after a failure, it only drains the queue
@@ -841,7 +597,7 @@ class RerunLogWriter:
         if self._queue is not None:
             self._queue.join()
         self._check()
-        self.rec.flush()
+        self._sender.flush()
 
     def close(
         self, *, complete: bool = True, stopped_at: int | None = None, reason: str | None = None
@@ -856,7 +612,7 @@ class RerunLogWriter:
         finally:
             self._stop_worker()
         if self._error is not None:
-            self.rec.disconnect()  # the .partial file stays, as after a crash
+            self._sender.abandon()  # the .partial file stays, as after a crash
             self._check()
         if complete:
             self._log_info("run complete")
@@ -864,13 +620,9 @@ class RerunLogWriter:
             at = stopped_at if stopped_at is not None else last
             stopped = f"run stopped at step {at}" + (f": {reason}" if reason else "")
             self._log_info(stopped)
-            if at is not None:
-                self.rec.set_time("step", sequence=int(at))
-            self.rec.log("log", rr.TextLog(stopped, level=rr.TextLogLevel.WARN))
-        self.rec.flush()
-        self.rec.disconnect()
-        os.replace(self.partial_path, self.path)
-        return self.path
+            self._sender.warn(at, stopped)
+        # flushed, closed and renamed (by a sender process: answered once it is)
+        return self._sender.finish(self.path)
 
     def abandon(self, reason: str | None = None) -> None:
         """Write out what is buffered and close the recording without renaming it (the .partial
@@ -885,11 +637,8 @@ class RerunLogWriter:
                     self._stop_worker()
                 if reason is not None and self._error is None:
                     self._log_info(f"not closed: {reason}")
-                    if self._sent_last is not None:
-                        self.rec.set_time("step", sequence=int(self._sent_last))
-                    self.rec.log("log", rr.TextLog(reason, level=rr.TextLogLevel.WARN))
-                self.rec.flush()
-                self.rec.disconnect()
+                    self._sender.warn(self._sent_last, reason)
+                self._sender.abandon()
             except Exception:  # noqa: BLE001 - best effort
                 pass
 
