@@ -64,9 +64,11 @@ class Recorder:
         bytes are the same in all of them; ``self.offload`` says which was used.
     children: writer processes started beforehand (`recorder.spawn.start_writer_child`),
         keyed "mcap" and/or "rrd": those files are written by them whatever ``offload`` says,
-        which then applies to the other file. `isaac run` starts them before it imports the
-        engine, so that their start-up overlaps its own. The recorder owns them: any it does
-        not use (an error came first) are stopped.
+        which then applies to the other file. The "rrd" one may be the Rerun sender
+        (`recorder.spawn.start_sender_child`): the recording is then drawn in this process and
+        sent by it (``offload`` then says "thread (rrd: sender process)"). `isaac run` starts
+        them before it imports the engine, so that their start-up overlaps its own. The
+        recorder owns them: any it does not use (an error came first) are stopped.
     """
 
     def __init__(
@@ -106,7 +108,7 @@ class Recorder:
             # each file's mode: "process" for those whose writer process was started
             # beforehand, ``offload`` for the others
             self._modes = {
-                k: "process" if k in self._children else offload
+                k: _child_mode(self._children[k]) if k in self._children else offload
                 for k, p in (("mcap", mcap_path), ("rrd", rrd_path))
                 if p is not None
             }
@@ -246,6 +248,19 @@ class Recorder:
         )
 
     def _rerun_writer(self, path, offload, impulse_scale):
+        from recorder.rerun_writer import RerunLogWriter
+
+        if offload == SENDER_MODE:
+            from recorder.writer_process import RerunSendProcess
+
+            sender = RerunSendProcess(self._children.pop("rrd"))
+            try:
+                return RerunLogWriter(
+                    path, self.model, self.scene, impulse_scale=impulse_scale, sender=sender.open
+                )
+            except BaseException:
+                sender.abandon()
+                raise
         if offload == "process":
             from recorder.frames import model_table
             from recorder.mcap_writer import joint_table_rows
@@ -265,8 +280,6 @@ class Recorder:
                     "joints": joint_table_rows(getattr(self.scene, "joints", ())),
                 },
             )
-        from recorder.rerun_writer import RerunLogWriter
-
         return RerunLogWriter(path, self.model, self.scene, impulse_scale=impulse_scale)
 
     def wait_ready(self) -> None:
@@ -462,9 +475,24 @@ def _same_state(a: StepRecord, b: StepRecord) -> bool:
     )
 
 
+# the mode of a Rerun recording drawn here and sent by the sender process (`recorder.rerun_send`)
+SENDER_MODE = "sender process"
+
+
+def _child_mode(child) -> str:
+    """The mode of a file whose process was started beforehand: "process" for a writer
+    process, SENDER_MODE for the Rerun sender."""
+    from recorder.spawn import SENDER
+
+    return SENDER_MODE if child.kind == SENDER else "process"
+
+
 def _describe_offload(modes: dict, offload: str) -> str:
     """`Recorder.offload`: the mode of every writer, or each file's when they differ
     ("rrd process, mcap thread": the Rerun recording by a process started beforehand)."""
+    if modes.get("rrd") == SENDER_MODE:  # "thread (rrd: sender process)": MCAP's mode first
+        rest = {k: v for k, v in modes.items() if k != "rrd"}
+        return f"{_describe_offload(rest, offload)} (rrd: {SENDER_MODE})" if rest else SENDER_MODE
     if len(set(modes.values())) <= 1:
         return next(iter(modes.values()), offload)
     return ", ".join(f"{k} {modes[k]}" for k in sorted(modes, key=lambda k: k != "rrd"))

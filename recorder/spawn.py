@@ -23,6 +23,12 @@ import tempfile
 from dataclasses import dataclass
 
 KINDS = ("mcap", "rerun")
+# the Rerun sender (`recorder.rerun_send`): fed drawn batches through a pipe, not a ring
+SENDER = "rerun-send"
+# the sender's command pipe, enlarged where Linux allows it (F_SETPIPE_SZ): a batch of the
+# default scene's drawing is about 0.3 MB, and the pipe's 64 KiB made the parent's writing
+# thread wait for the child at every batch
+SENDER_PIPE_BYTES = 1 << 20
 
 
 @dataclass
@@ -35,7 +41,7 @@ class WriterChild:
     configuration. stderr: the child's standard error (a temporary file, already unlinked).
     """
 
-    kind: str
+    kind: str  # one of KINDS, or SENDER (ring_fd is then -1: it has no ring)
     proc: subprocess.Popen
     cmd_fd: int
     reply_fd: int
@@ -46,6 +52,8 @@ class WriterChild:
         """Stop a child that will never be configured: closing the command pipe before the
         configuration makes it exit at once (status 0, no file written)."""
         for fd in (self.cmd_fd, self.reply_fd, self.ring_fd):
+            if fd < 0:
+                continue
             try:
                 os.close(fd)
             except OSError:
@@ -109,3 +117,40 @@ def start_writer_child(kind: str, keep_fd: int | None = None) -> WriterChild:
         os.close(cmd_r)
         os.close(rep_w)
     return WriterChild(kind, proc, cmd_w, rep_r, ring_fd, stderr)
+
+
+def start_sender_child(keep_fd: int | None = None) -> WriterChild:
+    """Start the Rerun sender process (`recorder.rerun_send`, run as ``python -m``): it imports
+    rerun-sdk at once, then waits for the recording's ``open`` on its command pipe. keep_fd:
+    as for `start_writer_child` (the ``.rrd`` output's lock, held until it exits)."""
+    cmd_r, cmd_w = os.pipe()
+    rep_r, rep_w = os.pipe()
+    try:
+        import fcntl
+
+        fcntl.fcntl(cmd_w, getattr(fcntl, "F_SETPIPE_SZ", 1031), SENDER_PIPE_BYTES)
+    except (ImportError, OSError):  # pragma: no cover - not Linux, or over pipe-max-size
+        pass
+    stderr = tempfile.TemporaryFile()
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    env = dict(os.environ)
+    env["PYTHONPATH"] = os.pathsep.join(p for p in (root, env.get("PYTHONPATH")) if p)
+    try:
+        proc = subprocess.Popen(
+            [sys.executable, "-m", "recorder.rerun_send", str(cmd_r), str(rep_w)],
+            pass_fds=(cmd_r, rep_w) + (() if keep_fd is None else (keep_fd,)),
+            stdin=subprocess.DEVNULL,
+            stdout=subprocess.DEVNULL,
+            stderr=stderr,
+            env=env,
+            process_group=0,  # as the writer processes: Ctrl-C reaches the run loop only
+        )
+    except BaseException:
+        for fd in (cmd_w, rep_r):
+            os.close(fd)
+        stderr.close()
+        raise
+    finally:
+        os.close(cmd_r)
+        os.close(rep_w)
+    return WriterChild(SENDER, proc, cmd_w, rep_r, -1, stderr)

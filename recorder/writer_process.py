@@ -79,7 +79,7 @@ from recorder.frames import (
     read_rerun_frame,
 )
 from recorder.pack import model_bundle
-from recorder.spawn import WriterChild, start_writer_child
+from recorder.spawn import SENDER, WriterChild, start_writer_child
 
 # shared memory per writer, in frames of the scene's size, within RING_MIN..RING_MAX bytes,
 # mapped pre-faulted (a fresh page costs a fault in each process: writes over a cold 32 MiB
@@ -673,6 +673,181 @@ class WriterProcess:
                 self._ring.close()
             except BufferError:
                 pass
+
+
+class RerunSendProcess:
+    """The Rerun sender (`recorder.rerun_send.RerunSender`) in a child process: the same calls,
+    each pickled and written to the child's command pipe by a thread of this process (the
+    caller only pickles: a batch's drawn arrays are copied at once, and may be reused).
+
+    Why: importing rerun-sdk (0.4-0.5 s of CPU) and the Python half of ``send_columns`` ran in
+    the simulating process and took most of what ``--rrd`` added to a short run; the child,
+    started by `isaac run` before the engine is imported (`recorder.spawn.start_sender_child`),
+    does both beside it. The drawing (`recorder.rerun_writer`, compiled kernels) stays here, so
+    the child imports neither numba nor the engine.
+
+    child: the started process (its kind `recorder.spawn.SENDER`). `open` is what
+    `RerunLogWriter` takes as its ``sender``. `finish` returns once the child has closed and
+    renamed the file and exited; a failure in the child is raised (LogError, its message) by
+    the next call that waits for it (`flush`, `finish`) or by any call once the pipe broke.
+    """
+
+    def __init__(self, child: WriterChild) -> None:
+        import queue
+        import threading
+
+        if child.kind != SENDER:
+            raise ValueError(f"a {child.kind} process is not the Rerun sender")
+        self.proc, self._cmd, self._rep, self._stderr = (
+            child.proc,
+            child.cmd_fd,
+            child.reply_fd,
+            child.stderr,
+        )
+        self.partial_path = "the Rerun recording"  # until `open`
+        self._replies = bytearray()
+        self._error: str | None = None  # the pipe broke (set by the thread)
+        self._finished = False
+        # at most a few batches in flight (a few MB): a caller ahead of the child waits here
+        self._queue = queue.Queue(maxsize=8)
+        self._thread = threading.Thread(target=self._work, name="isaac-rerun-pipe", daemon=True)
+        self._thread.start()
+
+    def open(self, partial_path: str, recording_id: str, **header):
+        """Start the recording (`RerunSender`'s arguments); returns self. Says at once, in the
+        caller, when ``partial_path`` cannot be written."""
+        self.partial_path = partial_path
+        try:
+            open(partial_path, "wb").close()
+        except OSError as exc:
+            self.abandon()
+            raise LogError(f"cannot write {partial_path}: {exc.strerror}") from exc
+        self._call("open", ((partial_path, recording_id), header))
+        return self
+
+    def info(self, markdown: str) -> None:
+        self._call("info", (markdown,))
+
+    def concrete(self, outlines, labels) -> None:
+        self._call("concrete", (outlines, labels))
+
+    def labels(self, step: int, time: float, labels) -> None:
+        self._call("labels", (int(step), float(time), labels))
+
+    def warn(self, step: int | None, text: str) -> None:
+        self._call("warn", (step, text))
+
+    def batch(self, *job) -> None:
+        self._call("batch", job)
+
+    def flush(self) -> None:
+        """Block until the child has written out everything sent so far."""
+        self._call("flush", ())
+        self._wait(b"S")
+
+    def finish(self, path: str) -> str:
+        """Close and rename the file in the child; returns once it has, and has exited."""
+        try:
+            self._call("close", (path,))
+            self._wait(b"D")
+        finally:
+            self._shutdown()
+        return path
+
+    def abandon(self, reason: str | None = None) -> None:
+        """The child writes out what it has and keeps the ``.partial``; returns once it exited."""
+        if self._finished:
+            return
+        try:
+            self._call("abandon", (reason,))
+        except LogError:
+            pass
+        self._shutdown()
+
+    def _call(self, method: str, args) -> None:
+        if self._finished:
+            raise LogError(f"writing {self.partial_path} failed: the recording is closed")
+        self._raise_if_broken()
+        body = pickle.dumps((method, args), protocol=pickle.HIGHEST_PROTOCOL)
+        self._queue.put(len(body).to_bytes(8, "little") + body)
+
+    def _work(self) -> None:
+        """The pipe's writer: commands in order; once the pipe broke, it only drains."""
+        while True:
+            data = self._queue.get()
+            try:
+                if data is None:
+                    return
+                if self._error is None:
+                    view = memoryview(data)
+                    while view:
+                        view = view[os.write(self._cmd, view) :]
+            except OSError:
+                self._error = "the Rerun sender process is gone"
+            finally:
+                self._queue.task_done()
+
+    def _raise_if_broken(self) -> None:
+        if self._error is not None:
+            self._read_replies(block=False)  # its own message, when it sent one
+            raise LogError(
+                f"writing {self.partial_path} failed: {self._error}{self._child_reason()}"
+            )
+
+    def _wait(self, kind: bytes) -> None:
+        """Wait for the reply ``kind`` (after every command queued so far was written)."""
+        self._queue.join()
+        self._raise_if_broken()
+        while kind not in self._replies:
+            if not self._read_replies(block=True):
+                self._error = self._error or "the Rerun sender process stopped"
+                self._raise_if_broken()
+        self._replies = self._replies[self._replies.index(kind) + 1 :]
+
+    def _read_replies(self, *, block: bool) -> bool:
+        """Read what the child said; False at the end of the pipe. A failure it reported
+        (``E`` and its message) is raised."""
+        if not block and not select.select([self._rep], [], [], 0)[0]:
+            return True
+        chunk = os.read(self._rep, 65536)
+        self._replies += chunk
+        at = self._replies.find(b"E")
+        if at >= 0 and len(self._replies) >= at + 5:
+            n = int.from_bytes(self._replies[at + 1 : at + 5], "little")
+            if len(self._replies) < at + 5 + n and chunk:
+                return self._read_replies(block=True)
+            msg = bytes(self._replies[at + 5 : at + 5 + n]).decode("utf-8", "replace")
+            raise LogError(f"writing {self.partial_path} failed: {msg}")
+        return bool(chunk)
+
+    def _child_reason(self) -> str:
+        code = self.proc.poll()
+        if code is None:
+            try:
+                code = self.proc.wait(timeout=5)
+            except subprocess.TimeoutExpired:
+                return ""
+        self._stderr.seek(0)
+        lines = [
+            ln for ln in self._stderr.read().decode("utf-8", "replace").splitlines() if ln.strip()
+        ]
+        last = f": {lines[-1].strip()}" if lines else ""
+        return f" (exit code {code}){last}"
+
+    def _shutdown(self) -> None:
+        if self._finished:
+            return
+        self._finished = True
+        self._queue.put(None)
+        self._thread.join()
+        os.close(self._cmd)  # the child ends at the end of the pipe, if not before
+        try:
+            self.proc.wait(timeout=60)
+        except subprocess.TimeoutExpired:  # pragma: no cover - a stuck child
+            self.proc.kill()
+            self.proc.wait()
+        os.close(self._rep)
+        self._stderr.close()
 
 
 # -- child side --------------------------------------------------------------------------------

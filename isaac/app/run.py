@@ -144,7 +144,14 @@ def _make_parent(out: str) -> None:
 
 def _plan_recording(args: argparse.Namespace, claims: dict, scene, steps: int) -> str:
     """Where the files are written (``--offload``; ``auto``: `choose_offload` on the log's
-    expected size), saying first what a long run will write."""
+    expected size), saying first what a long run will write.
+
+    A run whose log is surely small (`simple_log_bound` under LONG_RUN_BYTES) skips the
+    estimate, which loads a compiled kernel (`recorder.pack.message_sizes`) before the engine
+    is imported: there is nothing to announce, and `choose_offload` picks "thread" for any log
+    under SMALL_RUN_BYTES (> LONG_RUN_BYTES)."""
+    if simple_log_bound(len(scene.bodies), steps) < LONG_RUN_BYTES:
+        return "thread" if args.offload == "auto" else args.offload
     from recorder.frames import ROWS_PER_MOVING_BODY as ROWS_PER_MOVING
     from recorder.frames import expected_log_bytes
     from recorder.writer_process import choose_offload
@@ -164,6 +171,20 @@ def _plan_recording(args: argparse.Namespace, claims: dict, scene, steps: int) -
         return args.offload
     # a short run does not wait for writer processes to start
     return choose_offload(len(claims), log_bytes=total)
+
+
+def _start_sender(offload: str, claims: dict) -> dict:
+    """{"rrd": the Rerun sender process} when a Rerun recording is asked for and ``--offload``
+    is auto or thread, started at once (`recorder.spawn.start_sender_child`): it imports
+    rerun-sdk (0.4-0.5 s of CPU) while this process imports the engine and runs, and sends
+    what this process draws (`recorder.writer_process.RerunSendProcess`). {} otherwise: with
+    ``--offload process`` the Rerun writer process draws and sends, with ``none`` this
+    process does both."""
+    if "rrd" not in claims or offload not in ("auto", "thread"):
+        return {}
+    from recorder.spawn import start_sender_child
+
+    return {"rrd": start_sender_child(claims["rrd"].fd)}
 
 
 def _start_writers(offload: str, claims: dict) -> dict:
@@ -212,8 +233,11 @@ def cmd_run(args: argparse.Namespace) -> int:
     claims = _claim_outputs(args)
     children = {}
     try:
+        children = _start_sender(args.offload, claims)
         offload = _plan_recording(args, claims, scene, steps) if claims else args.offload
-        children = _start_writers(offload, claims)
+        children.update(
+            _start_writers(offload, {k: c for k, c in claims.items() if k not in children})
+        )
         # imported here, after the writers started: compiling kernels is not needed for --help
         from isaac.engine.simulation import Simulation
 
@@ -373,6 +397,19 @@ def cmd_run(args: argparse.Namespace) -> int:
 
 # a recording expected to take this much (MCAP, uncompressed) is announced with its size first
 LONG_RUN_BYTES = 50_000_000
+# `simple_log_bound`: bytes a step at most besides the bodies' (varints, heads, the /stats
+# message and the records' overhead), and a body's at most (its /bodies row, 49 bytes, and the
+# /contacts rows `expected_log_bytes` assumes for a moving body, 205 bytes; 254 in all)
+BOUND_STEP_BYTES = 1024
+BOUND_BODY_BYTES = 256
+
+
+def simple_log_bound(n_bodies: int, steps: int) -> int:
+    """An upper bound of `recorder.frames.expected_log_bytes` (uncompressed MCAP bytes of a run
+    of ``steps`` steps after step 0), by arithmetic alone: no kernel is loaded."""
+    return (BOUND_STEP_BYTES + BOUND_BODY_BYTES * n_bodies) * (steps + 1)
+
+
 # compressed size / uncompressed size of the log, measured on scenes/default.yaml and
 # scenes/pile.yaml (log format 2, docs/log-format.md): what the expected size says beside it
 COMPRESSED_SHARE = {"lz4": (0.68, 0.82), "zstd": (0.61, 0.71)}
