@@ -1077,4 +1077,9 @@ def child_main(argv: list[str]) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(child_main(sys.argv[1:]))
+    code = child_main(sys.argv[1:])
+    # the file is closed, or written out and flushed (abandoned): the interpreter's teardown
+    # (0.1-0.2 s: numba, rerun-sdk, the mcap library) would only delay the parent, which waits
+    # for this process to exit before it reports the files finished
+    sys.stderr.flush()
+    os._exit(code)
