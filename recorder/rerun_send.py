@@ -15,7 +15,8 @@ data is the same either way.
 This module imports only rerun-sdk, numpy, pyarrow and `recorder.blueprint`: the child never
 imports numba or the engine.
 
-Child protocol (``python -m recorder.rerun_send CMD_FD REPLY_FD``): each command is a pickled
+Child protocol (``python -m recorder.rerun_send CMD_FD REPLY_FD [PREOPEN_JSON]``, the last the
+`RerunSender` arguments when the parent knew them at the start): each command is a pickled
 tuple ``(method, args)`` preceded by its length (8 bytes, little-endian): ``open`` first (the
 `RerunSender` arguments), then any `RerunSender` method, ``flush`` (answered ``S``), ``close``
 (finish and rename; answered ``D`` once the file is closed and renamed, then the child exits)
@@ -92,30 +93,21 @@ def _vec2(points: np.ndarray) -> pa.Array:
 
 
 class RerunSender:
-    """One recording stream writing ``partial_path``: the layout and static entities at once,
-    then what `RerunLogWriter` hands over.
+    """One recording stream writing ``partial_path``: the layout and static entities at once
+    (what the scene alone decides), then the drawing scales (`scales`, which need the model)
+    and what `RerunLogWriter` hands over. `open_sender` does the first two in one go.
 
     recording_id: Rerun's recording id (``isaac-<scene name>``).
-    impulse_scale (m per N s), normal_length (m), push_scale: the drawing scales, stored in the
-        recording as AnyValues on ``world/impulses``.
     joints: whether the run has joints (their entities' static styles are logged).
     moving: the number of moving bodies (their labels are drawn only up to LABELS_DRAWN_UP_TO).
     """
 
-    def __init__(
-        self,
-        partial_path: str,
-        recording_id: str,
-        *,
-        impulse_scale: float,
-        normal_length: float,
-        push_scale: float,
-        joints: bool,
-        moving: int,
-    ) -> None:
+    def __init__(self, partial_path: str, recording_id: str, *, joints: bool, moving: int) -> None:
         self.partial_path = partial_path
         self.last_step: int | None = None  # the last step of the batches sent
         self.joints = joints
+        # what the sender process compares with the recording it is asked to open
+        self.key = (partial_path, recording_id, bool(joints), int(moving))
         self.rec = rec = rr.RecordingStream(APP_ID, recording_id=recording_id)
         rec.save(partial_path)
         # the layout (recorder.blueprint), made active: the same on every load
@@ -179,7 +171,14 @@ class RerunSender:
                 ),
                 static=True,
             )
-        rec.log(
+        for name in STAT_NAMES:
+            rec.log(f"stats/{name}", blueprint.series_style(name), static=True)
+
+    def scales(self, impulse_scale: float, normal_length: float, push_scale: float) -> None:
+        """The drawing scales, static AnyValues on ``world/impulses``: impulse_scale m of arrow
+        per N s, normal_length m (a unit normal's drawn length), push_scale (push-out arrows'
+        drawn length over their true one)."""
+        self.rec.log(
             "world/impulses",
             rr.AnyValues(
                 impulse_scale_m_per_Ns=impulse_scale,
@@ -188,8 +187,6 @@ class RerunSender:
             ),
             static=True,
         )
-        for name in STAT_NAMES:
-            rec.log(f"stats/{name}", blueprint.series_style(name), static=True)
 
     def info(self, markdown: str) -> None:
         """The ``info`` text beside the view (static: the viewer keeps the last one logged)."""
@@ -381,6 +378,22 @@ class RerunSender:
             self.rec.disconnect()
 
 
+def open_sender(
+    partial_path: str,
+    recording_id: str,
+    *,
+    impulse_scale: float,
+    normal_length: float,
+    push_scale: float,
+    joints: bool,
+    moving: int,
+) -> RerunSender:
+    """A `RerunSender` with its scales logged: what `RerunLogWriter` calls its ``sender``."""
+    sender = RerunSender(partial_path, recording_id, joints=joints, moving=moving)
+    sender.scales(impulse_scale, normal_length, push_scale)
+    return sender
+
+
 # -- child process -----------------------------------------------------------------------------
 _LENGTH = 8  # bytes of a command's length prefix (little-endian)
 
@@ -397,8 +410,11 @@ def _read_exactly(fd: int, n: int) -> bytes | None:
     return b"".join(parts)
 
 
-def child_main(cmd_fd: int, rep_fd: int) -> int:
-    """The child: read commands, send them to the file; see the module docstring."""
+def child_main(cmd_fd: int, rep_fd: int, preopen: dict | None = None) -> int:
+    """The child: read commands, send them to the file; see the module docstring. preopen:
+    `RerunSender`'s arguments, known before the run's model is (`recorder.spawn`): the stream,
+    its layout and static entities are made at once, while the parent is still starting, and
+    the ``open`` command that agrees with them only adds the scales."""
     import pickle
     import signal
 
@@ -416,9 +432,11 @@ def child_main(cmd_fd: int, rep_fd: int) -> int:
         except BrokenPipeError:  # the parent died: its commands still go into the file
             parent_gone = True
 
-    reply(b"K")
     sender = None
     try:
+        if preopen is not None:
+            sender = RerunSender(**preopen)
+        reply(b"K")
         while True:
             head = _read_exactly(cmd_fd, _LENGTH)
             body = None if head is None else _read_exactly(cmd_fd, int.from_bytes(head, "little"))
@@ -428,7 +446,14 @@ def child_main(cmd_fd: int, rep_fd: int) -> int:
                 return 0
             method, args = pickle.loads(body)
             if method == "open":
-                sender = RerunSender(*args[0], **args[1])
+                (partial_path, recording_id), header = args
+                scales = [header.pop(k) for k in ("impulse_scale", "normal_length", "push_scale")]
+                key = (partial_path, recording_id, bool(header["joints"]), int(header["moving"]))
+                if sender is None or sender.key != key:  # not made beforehand, or otherwise
+                    if sender is not None:
+                        sender.abandon()
+                    sender = RerunSender(partial_path, recording_id, **header)
+                sender.scales(*scales)
             elif method == "flush":
                 sender.flush()
                 reply(b"S")
@@ -455,9 +480,11 @@ def child_main(cmd_fd: int, rep_fd: int) -> int:
 
 
 if __name__ == "__main__":
+    import json
     import sys
 
-    code = child_main(int(sys.argv[1]), int(sys.argv[2]))
+    preopen = json.loads(sys.argv[3]) if len(sys.argv) > 3 else None
+    code = child_main(int(sys.argv[1]), int(sys.argv[2]), preopen)
     # the file is closed (or abandoned and flushed): skip the interpreter's teardown
     sys.stderr.flush()
     os._exit(code)

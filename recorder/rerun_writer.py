@@ -153,8 +153,9 @@ class RerunLogWriter:
         default ``model.joints``: each joint is drawn as a line between its bodies' anchors,
         the anchors marked (a revolute joint's coincide: its pivot).
     sender: what makes the object that does the ``rr.*`` calls, called with the ``.partial``
-        path, the recording id and the drawing scales; default `recorder.rerun_send.RerunSender`
-        (rerun-sdk in this process); `isaac run` passes a `RerunSendProcess`'s ``open``.
+        path, the recording id and the drawing scales; default
+        `recorder.rerun_send.open_sender` (rerun-sdk in this process); `isaac run` passes a
+        `RerunSendProcess`'s ``open``.
     """
 
     def __init__(
@@ -215,7 +216,7 @@ class RerunLogWriter:
         # the recording stream, its layout and static entities (recorder.rerun_send): in this
         # process, or in the sender process `isaac run` started (RerunSendProcess.open)
         if sender is None:
-            from recorder.rerun_send import RerunSender as sender
+            from recorder.rerun_send import open_sender as sender
         self._sender = sender(
             self.partial_path,
             f"isaac-{scene.name}",

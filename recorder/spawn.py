@@ -16,6 +16,7 @@ size and the scene's tables, which need the engine) on the command pipe; the pro
 
 from __future__ import annotations
 
+import json
 import os
 import subprocess
 import sys
@@ -119,10 +120,13 @@ def start_writer_child(kind: str, keep_fd: int | None = None) -> WriterChild:
     return WriterChild(kind, proc, cmd_w, rep_r, ring_fd, stderr)
 
 
-def start_sender_child(keep_fd: int | None = None) -> WriterChild:
+def start_sender_child(keep_fd: int | None = None, preopen: dict | None = None) -> WriterChild:
     """Start the Rerun sender process (`recorder.rerun_send`, run as ``python -m``): it imports
     rerun-sdk at once, then waits for the recording's ``open`` on its command pipe. keep_fd:
-    as for `start_writer_child` (the ``.rrd`` output's lock, held until it exits)."""
+    as for `start_writer_child` (the ``.rrd`` output's lock, held until it exits). preopen:
+    what the scene alone tells of the recording (`recorder.rerun_send.RerunSender`'s
+    partial_path, recording_id, joints, moving): the child then makes the stream, its layout
+    and static entities before the parent has built its model (0.1 s it no longer waits for)."""
     cmd_r, cmd_w = os.pipe()
     rep_r, rep_w = os.pipe()
     try:
@@ -137,7 +141,8 @@ def start_sender_child(keep_fd: int | None = None) -> WriterChild:
     env["PYTHONPATH"] = os.pathsep.join(p for p in (root, env.get("PYTHONPATH")) if p)
     try:
         proc = subprocess.Popen(
-            [sys.executable, "-m", "recorder.rerun_send", str(cmd_r), str(rep_w)],
+            [sys.executable, "-m", "recorder.rerun_send", str(cmd_r), str(rep_w)]
+            + ([] if preopen is None else [json.dumps(preopen)]),
             pass_fds=(cmd_r, rep_w) + (() if keep_fd is None else (keep_fd,)),
             stdin=subprocess.DEVNULL,
             stdout=subprocess.DEVNULL,

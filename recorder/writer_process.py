@@ -714,14 +714,10 @@ class RerunSendProcess:
         self._thread.start()
 
     def open(self, partial_path: str, recording_id: str, **header):
-        """Start the recording (`RerunSender`'s arguments); returns self. Says at once, in the
-        caller, when ``partial_path`` cannot be written."""
+        """Start the recording (`recorder.rerun_send.open_sender`'s arguments); returns self.
+        The file is not touched here: the output's claim (`recorder.outputs`) made sure it can
+        be written, and a child started with ``preopen`` is writing it already."""
         self.partial_path = partial_path
-        try:
-            open(partial_path, "wb").close()
-        except OSError as exc:
-            self.abandon()
-            raise LogError(f"cannot write {partial_path}: {exc.strerror}") from exc
         self._call("open", ((partial_path, recording_id), header))
         return self
 

@@ -173,7 +173,7 @@ def _plan_recording(args: argparse.Namespace, claims: dict, scene, steps: int) -
     return choose_offload(len(claims), log_bytes=total)
 
 
-def _start_sender(offload: str, claims: dict) -> dict:
+def _start_sender(offload: str, claims: dict, scene) -> dict:
     """{"rrd": the Rerun sender process} when a Rerun recording is asked for and ``--offload``
     is auto or thread, started at once (`recorder.spawn.start_sender_child`): it imports
     rerun-sdk (0.4-0.5 s of CPU) while this process imports the engine and runs, and sends
@@ -184,7 +184,13 @@ def _start_sender(offload: str, claims: dict) -> dict:
         return {}
     from recorder.spawn import start_sender_child
 
-    return {"rrd": start_sender_child(claims["rrd"].fd)}
+    preopen = {
+        "partial_path": claims["rrd"].partial_path,
+        "recording_id": f"isaac-{scene.name}",
+        "joints": bool(scene.joints),
+        "moving": sum(not b.concrete for b in scene.bodies),
+    }
+    return {"rrd": start_sender_child(claims["rrd"].fd, preopen)}
 
 
 def _start_writers(offload: str, claims: dict) -> dict:
@@ -233,7 +239,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     claims = _claim_outputs(args)
     children = {}
     try:
-        children = _start_sender(args.offload, claims)
+        children = _start_sender(args.offload, claims, scene)
         offload = _plan_recording(args, claims, scene, steps) if claims else args.offload
         children.update(
             _start_writers(offload, {k: c for k, c in claims.items() if k not in children})
