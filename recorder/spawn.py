@@ -12,6 +12,10 @@ not delay the start it exists to hasten. The child is `python -m recorder.writer
 imports its writer's libraries at once and only then waits for its configuration (the ring's
 size and the scene's tables, which need the engine) on the command pipe; the protocol is in
 `recorder.writer_process`.
+
+`start_sender_child` starts the Rerun sender the same way (`recorder.rerun_send`: it imports
+rerun-sdk only, and is fed drawn batches through a pipe, with no ring), for ``--offload auto``
+and ``thread``.
 """
 
 from __future__ import annotations

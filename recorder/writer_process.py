@@ -1,5 +1,9 @@
 """Run one log writer (MCAP or Rerun) in a child process, fed step by step through shared memory.
 
+(`RerunSendProcess`, at the end of the parent side, is the other kind of child: the Rerun
+sender, fed drawn batches through a pipe; `isaac run --rrd` uses it unless ``--offload`` is
+process or none. Its protocol is in `recorder.rerun_send`.)
+
 Why a process: a step's record is 0.1 to several MB. Encoding, hashing and writing it in the
 simulating process cost 40-90 % on top of the 500- and 2,000-body piles, and a writer *thread*
 did not hide it: the mcap and Rerun libraries run Python code that holds the GIL, so the engine

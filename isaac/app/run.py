@@ -38,7 +38,8 @@ def register(subparsers) -> None:
         choices=("auto", "process", "thread", "none"),
         default="auto",
         help="where the files are written: writer processes, a thread, or this process "
-        "(default auto: processes when the machine has an idle CPU for each, else a thread)",
+        "(default auto: processes when the machine has an idle CPU for each, else a thread); "
+        "with auto or thread, a Rerun recording is sent by a process of its own",
     )
     run.add_argument(
         "--force",
