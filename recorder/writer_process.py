@@ -982,6 +982,7 @@ def child_main(argv: list[str]) -> int:
     commands = _PolledReader(cmd_fd)
     # the writer's libraries now, while the parent imports the engine (recorder.spawn)
     if kind == "rerun":
+        import recorder.rerun_send  # noqa: F401 - rerun-sdk (the drawing half does without it)
         import recorder.rerun_writer  # noqa: F401
     else:
         import recorder.mcap_writer  # noqa: F401
