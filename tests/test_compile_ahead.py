@@ -1,6 +1,6 @@
-"""First run with an empty numba cache (isaac.engine.compile_ahead): the solver is compiled by a
-helper process into the cache, this process loads it from there, and the run's bits do not
-change."""
+"""First run with an empty numba cache (isaac.engine.compile_ahead): the solver and the joints'
+kernels are compiled by two helper processes into the cache, this process loads them from there,
+and the run's bits do not change."""
 
 from __future__ import annotations
 
@@ -19,7 +19,7 @@ from isaac.engine.step import StepSettings
 _FIRST_RUN = r"""
 import json, sys
 sys.path.insert(0, {tests!r})
-from isaac.engine.compile_ahead import is_cold, solver_kernel
+from isaac.engine.compile_ahead import WAITING, is_cold, joints_kernel, solver_kernel
 from isaac.engine.diagnostics import state_hash
 from isaac.engine.simulation import Simulation
 from test_determinism import pile_scene
@@ -28,8 +28,13 @@ scene = pile_scene("balanced")
 sim = Simulation(scene)
 kernel = solver_kernel(sim.settings)
 cold_after_build = is_cold(kernel)
-hashes = [state_hash(rec) for rec in sim.run()]
+joints_helper = len(WAITING)
+hashes = [state_hash(rec) for rec in sim.run()]  # the driver: after the joints' helper
+joints = joints_kernel()
 print(json.dumps({{"cold_after_build": cold_after_build, "hashes": hashes,
+                   "joints_helper": joints_helper, "waiting_after_run": len(WAITING),
+                   "joints_cache_hits": sum(joints.stats.cache_hits.values()),
+                   "joints_cache_misses": sum(joints.stats.cache_misses.values()),
                    "solver_cache_hits": sum(kernel.stats.cache_hits.values()),
                    "solver_cache_misses": sum(kernel.stats.cache_misses.values())}}))
 """
@@ -51,12 +56,15 @@ def _first_run(tmp_path) -> dict:
     return json.loads(proc.stdout.strip().splitlines()[-1])
 
 
-def test_a_cold_cache_gets_the_solver_from_the_helper_and_the_same_bits(tmp_path):
+def test_a_cold_cache_gets_the_solver_and_joints_from_the_helpers_and_the_same_bits(tmp_path):
     # one first run (~8 s of compiling on 2 cores): the path every new machine and CI takes
     got = _first_run(tmp_path)
     assert got["cold_after_build"] is False  # the helper wrote the solver's cache index
     # the first step loaded the solver from that cache instead of compiling it
     assert (got["solver_cache_hits"], got["solver_cache_misses"]) == (1, 0)
+    # the joints' helper ran beside the build, and the driver's compile loaded its kernels
+    assert (got["joints_helper"], got["waiting_after_run"]) == (1, 0)
+    assert (got["joints_cache_hits"], got["joints_cache_misses"]) == (1, 0)
     expected = [state_hash(rec) for rec in Simulation(pile_scene("balanced")).run()]
     assert got["hashes"] == expected
 

@@ -1,6 +1,8 @@
-"""Cached kernels load without numba's compiler registries (isaac/kernel_loading.py), and that
-changes nothing but what is imported: the same bits as numba's own eager loading, and a kernel
-compiled afterwards still compiles and runs."""
+"""Cached kernels load without numba's compiler registries, without parsing their bitcode and
+without importing numba's implementation modules or numpy.ma (isaac/kernel_loading.py), and that
+changes nothing but what is imported and when: the same bits as numba's own eager loading, a
+kernel compiled afterwards still compiles and runs (also against a lazily loaded kernel), and a
+stale cache still recompiles."""
 
 from __future__ import annotations
 
@@ -30,7 +32,17 @@ sim = Simulation(scene)
 hashes = [state_hash(sim.step()) for _ in range(5)]  # one compiled call per stage
 hashes += [state_hash(r) for r in sim.run(40)]  # the compiled driver
 loaded = [m for m in {modules!r} if m in sys.modules]
+ran = [m for m in DEFERRED if type(sys.modules.get(m)).__name__ == "module"]
+from isaac.engine.geometry import sin_cos
+from isaac.trig import sin_cos as sin_cos_python
+direct = sin_cos(0.3)  # loaded from the cache
 import numba  # a kernel compiled now, after the cached loads: the compiler refreshes itself
+
+@numba.njit
+def through(a):  # compiled against the loaded kernel (lazily: its bitcode parsed now)
+    return sin_cos(a)
+
+linked = through(0.3)
 
 @numba.njit
 def weighted(x, w):
@@ -38,13 +50,20 @@ def weighted(x, w):
 
 compiled = weighted(np.arange(4.0), np.arange(4.0))
 from isaac import kernel_loading
-print(json.dumps({{"hashes": hashes, "loaded": loaded, "compiled": compiled,
-                   "lazy": kernel_loading.LAZY}}))
+same_sin_cos = list(direct) == list(linked) == list(sin_cos_python(0.3))
+print(json.dumps({{"hashes": hashes, "loaded": loaded, "compiled": compiled, "ran": ran,
+                   "lazy": kernel_loading.LAZY, "same_sin_cos": same_sin_cos}}))
 """
+
+# run by a cached load only when it is eager: numba's implementation modules that the kernels'
+# environments name (numba.np.arraymath imports the other two) and numpy.ma (numba's typeof)
+DEFERRED = ("numba.np.arraymath", "numba.np.arrayobj", "numpy.ma")
 
 
 def _run(scene: str, **env) -> dict:
-    code = _RUN.format(scene=str(ROOT / "scenes" / scene), modules=REGISTRY_ONLY)
+    code = f"DEFERRED = {DEFERRED!r}\n" + _RUN.format(
+        scene=str(ROOT / "scenes" / scene), modules=REGISTRY_ONLY
+    )
     proc = subprocess.run(
         [sys.executable, "-c", code],
         cwd=ROOT,
@@ -68,3 +87,66 @@ def test_cached_kernels_load_without_the_compiler_registries_and_give_the_same_b
     assert lazy["loaded"] == [] and eager["loaded"] == list(REGISTRY_ONLY)
     assert lazy["hashes"] == eager["hashes"] and len(set(lazy["hashes"])) == 45
     assert lazy["compiled"] == eager["compiled"] == 14.0  # 0 + 1 + 4 + 9
+    assert lazy["ran"] == [] and eager["ran"] == list(DEFERRED)
+    assert lazy["same_sin_cos"] and eager["same_sin_cos"]
+
+
+_KERNEL = """
+import numba
+import numpy as np
+
+@numba.njit(cache=True)
+def total(x):
+    return np.sum(x) * SCALE  # (np.sum: an environment in numba.np.arraymath)
+"""
+
+_USE = r"""
+import json, sys
+sys.path.insert(0, {folder!r})
+import numpy as np
+from isaac import kernel_loading
+import kernel
+value = kernel.total(np.arange(4.0))
+import numba
+
+@numba.njit
+def plus_one(x):
+    return kernel.total(x) + 1.0
+
+print(json.dumps({{"value": value, "plus_one": plus_one(np.arange(4.0)),
+                   "lazy": kernel_loading.LAZY,
+                   "hits": sum(kernel.total.stats.cache_hits.values())}}))
+"""
+
+
+@pytest.mark.skipif(
+    os.environ.get("NUMBA_DISABLE_JIT") == "1", reason="no kernel is loaded without the JIT"
+)
+def test_a_stale_or_missing_cache_recompiles_and_a_lazy_load_links_like_an_eager_one(tmp_path):
+    source = tmp_path / "kernel.py"
+
+    def use(scale: float, **env) -> dict:
+        source.write_text(f"SCALE = {scale!r}\n" + _KERNEL)
+        stamp = 1e9 + scale  # (numba tells a stale source by its time stamp and size)
+        os.utime(source, (stamp, stamp))
+        proc = subprocess.run(
+            [sys.executable, "-c", _USE.format(folder=str(tmp_path))],
+            env={**os.environ, **env},
+            capture_output=True,
+            text=True,
+            timeout=600,
+        )
+        assert proc.returncode == 0, proc.stderr[-3000:]
+        return json.loads(proc.stdout.strip().splitlines()[-1])
+
+    missing = use(2.0)  # no cache yet: compiled and saved
+    lazy = use(2.0)
+    eager = use(2.0, ISAAC_EAGER_KERNEL_LOADING="1")
+    assert (missing["hits"], lazy["hits"], eager["hits"]) == (0, 1, 1)
+    assert lazy["lazy"] and not eager["lazy"]
+    assert missing["value"] == lazy["value"] == eager["value"] == 12.0
+    assert missing["plus_one"] == lazy["plus_one"] == eager["plus_one"] == 13.0
+    stale = use(3.0)  # a new source: the cached kernel is stale
+    assert stale["hits"] == 0 and (stale["value"], stale["plus_one"]) == (18.0, 19.0)
+    again = use(3.0)
+    assert again["hits"] == 1 and (again["value"], again["plus_one"]) == (18.0, 19.0)

@@ -357,3 +357,12 @@ def test_the_overlap_warned_of_is_the_depth_the_engine_finds_at_step_0():
         engine = float(Simulation(scene).detect().depth.max())
         assert abs(ours - engine) < 1e-9, (ours, engine)
         assert f"by {ours:.3g} m" in line
+
+
+def test_the_grid_cell_quantile_is_numpys_to_the_bit():
+    # (box_pairs' cell size without np.quantile, which imports numpy.ma at start-up)
+    rng = np.random.default_rng(7)
+    for n in [*range(1, 60), 1000, 4321]:
+        for scale in (1e-3, 1.0, 1e3):
+            x = rng.random(n) * scale
+            assert overlaps._quantile_90(x) == float(np.quantile(x, 0.9))

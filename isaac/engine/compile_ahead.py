@@ -53,13 +53,18 @@ class _SmallWorld:
     """Two overlapping 1 m boxes (the lower one concrete) under `world`'s settings, as the step's
     stages take them."""
 
-    def __init__(self, world) -> None:
+    def __init__(self, world, *, joint: bool = False) -> None:
+        """joint: the box hangs from the floor by a revolute joint (for the joints' kernels)."""
         from isaac.engine.joints import JOINT_IMPULSES
         from isaac.engine.records import Contacts
         from isaac.engine.step import ContactCache, StepSettings, Workspace
         from isaac.engine.world import build_model, initial_state
         from isaac.scene import BodySpec, Scene
+        from isaac.scene.spec import JointSpec
 
+        hinge = JointSpec(
+            name="hinge", kind="revolute", a=0, b=1, local_a=(0.0, 0.5), local_b=(0.0, -0.45)
+        )
         scene = Scene(
             name="compile-ahead",
             world=world,
@@ -67,6 +72,7 @@ class _SmallWorld:
                 BodySpec(name="floor", vertices=_BOX, concrete=True),
                 BodySpec(name="box", vertices=_BOX, position=(0.0, 0.95)),
             ),
+            joints=(hinge,) if joint else (),
         )
         self.dt = world.dt
         self.model = build_model(scene)
@@ -78,14 +84,30 @@ class _SmallWorld:
         )
 
 
+WAITING: list = []  # helpers compiling what only the driver needs (the joints' kernels)
+
+
+def joints_kernel():
+    """A kernel of the joints' the driver calls (`prepare_joints`; the others are compiled with
+    it): cold means the joints' helper has work to do."""
+    from isaac.engine.joints import prepare_joints
+
+    return prepare_joints
+
+
 def prepare(settings, world) -> None:
     """Before the first step of a simulation with these StepSettings and WorldSettings: if the
     solver is not in numba's cache, compile it in a helper process while this one compiles the
-    other stages (see the module docstring)."""
+    other stages (see the module docstring); and if the joints' kernels are not in it either,
+    compile them in a second helper, which `finish` waits for before the driver's first call."""
     if not is_cold(solver_kernel(settings)):
         return
     import subprocess  # (only with a cold cache: 6 ms of every start-up otherwise)
 
+    if is_cold(joints_kernel()) and not WAITING:
+        joints_helper = _start_helper(world, "joints")
+        if joints_helper is not None:
+            WAITING.append(joints_helper)
     helper = _start_helper(world)
     if helper is None:
         return
@@ -106,8 +128,37 @@ def prepare(settings, world) -> None:
             raise
 
 
-def _start_helper(world) -> subprocess.Popen | None:
-    """`python -m isaac.engine.compile_ahead`, `world` pickled on its standard input; or None."""
+def finish() -> None:
+    """Wait for the joints' helper `prepare` started, if any (before the driver's first call:
+    its compile links the joints' kernels, which it would otherwise compile itself). A helper
+    that fails or takes too long changes nothing: the driver compiles what the cache lacks."""
+    import subprocess
+
+    while WAITING:
+        helper = WAITING.pop()
+        try:
+            helper.wait(timeout=HELPER_TIMEOUT_S)
+        except BaseException as exc:
+            helper.kill()
+            helper.wait()
+            if not isinstance(exc, subprocess.TimeoutExpired):
+                raise
+
+
+def _stop_waiting() -> None:
+    """At exit (a process that never called the driver): no helper outlives it. numba writes a
+    cache file whole (a temporary file, then a rename), so a killed helper leaves none half
+    written."""
+    while WAITING:
+        helper = WAITING.pop()
+        helper.kill()
+        helper.wait()
+
+
+def _start_helper(world, what: str = "solver") -> subprocess.Popen | None:
+    """`python -m isaac.engine.compile_ahead WHAT`, `world` pickled on its standard input; or
+    None."""
+    import atexit
     import subprocess
 
     root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
@@ -115,7 +166,7 @@ def _start_helper(world) -> subprocess.Popen | None:
     env["PYTHONPATH"] = os.pathsep.join(p for p in (root, env.get("PYTHONPATH")) if p)
     try:
         proc = subprocess.Popen(
-            [sys.executable, "-m", "isaac.engine.compile_ahead"],
+            [sys.executable, "-m", "isaac.engine.compile_ahead", what],
             stdin=subprocess.PIPE,
             stdout=subprocess.DEVNULL,
             stderr=subprocess.DEVNULL,
@@ -125,6 +176,7 @@ def _start_helper(world) -> subprocess.Popen | None:
             proc.stdin.write(pickle.dumps(world, protocol=pickle.HIGHEST_PROTOCOL))
     except OSError:
         return None
+    atexit.register(_stop_waiting)  # (once is enough; registering again is harmless)
     return proc
 
 
@@ -137,5 +189,31 @@ def _compile_solver(world) -> None:
     resolve(small.model, small.settings, small.state, small.work, small.cache, 0)
 
 
+def _compile_joints(world) -> None:
+    """The joints' helper's work: the joint kernels the driver calls, on a box hanging by a
+    revolute joint (the other stages are this helper's siblings' work)."""
+    from isaac.engine.joints import correct_joint_positions
+    from isaac.engine.step import _prepare_joints, initial_joint_rows, joint_rows
+
+    small = _SmallWorld(world, joint=True)
+    model, state, work = small.model, small.state, small.work
+    initial_joint_rows(model, state, work)
+    _prepare_joints(model, state, work, small.settings.h, small.cache.joints, True)
+    correct_joint_positions(
+        model.joints,
+        model.joint_waves,
+        state.position,
+        state.angle,
+        state.exists,
+        model.inv_mass,
+        model.inv_inertia,
+        small.settings.position_iterations,
+        work.joint_error,
+    )
+    joint_rows(model, state, work)
+    # (keep_joint_impulses, small, is compiled by this process's parent with the other stages)
+
+
 if __name__ == "__main__":
-    _compile_solver(pickle.load(sys.stdin.buffer))
+    what = sys.argv[1] if len(sys.argv) > 1 else "solver"
+    (_compile_joints if what == "joints" else _compile_solver)(pickle.load(sys.stdin.buffer))

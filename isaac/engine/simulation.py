@@ -7,6 +7,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from isaac.engine import compile_ahead as _ahead
 from isaac.engine.driver import STAGES, Stepper
 from isaac.engine.integrate import DIVERGED_ANGLE, DIVERGED_POSITION, DIVERGED_SPEED, diverged_body
 from isaac.engine.joints import JOINT_IMPULSES
@@ -83,9 +84,7 @@ class Simulation:
         if start is not None:
             self.resume(start)
         if compile_ahead:
-            from isaac.engine.compile_ahead import prepare
-
-            prepare(self.settings, scene.world)
+            _ahead.prepare(self.settings, scene.world)
 
     def resume(self, record: StepRecord) -> None:
         """Continue from a record of this scene (a logged keyframe), keeping the model.
@@ -117,6 +116,8 @@ class Simulation:
         if not self._carry_in_stepper:
             self._stepper.set_carry(self._cache)
             self._carry_in_stepper = True
+        if _ahead.WAITING:
+            _ahead.finish()  # the joints' kernels, which the driver's compile links
         return self._stepper.run(self.state, steps, batch)
 
     def stage_times(self) -> dict[str, float]:

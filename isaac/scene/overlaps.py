@@ -122,6 +122,19 @@ def place(bodies) -> Placement:
     )
 
 
+def _quantile_90(x: np.ndarray) -> float:
+    """np.quantile(x, 0.9) (its default linear method, the same value bit for bit) without
+    np.quantile, which imports numpy.ma (through np.unique) on every start-up that checks a
+    scene: 5-10 ms of CPU."""
+    s = np.sort(x)
+    at = (len(s) - 1) * 0.9
+    i = int(at)
+    gamma = at - i
+    a, b = s[i], s[min(i + 1, len(s) - 1)]
+    # numpy's _lerp: from the nearer end
+    return float(b - (b - a) * (1.0 - gamma)) if gamma >= 0.5 else float(a + (b - a) * gamma)
+
+
 def box_pairs(lo: np.ndarray, hi: np.ndarray, limit: int) -> tuple[np.ndarray, np.ndarray, bool]:
     """(a, b, complete): the pairs a < b whose bounding boxes overlap (touching counts), sorted
     by (a, b); at most `limit` of them, complete False if more were left out.
@@ -137,7 +150,7 @@ def box_pairs(lo: np.ndarray, hi: np.ndarray, limit: int) -> tuple[np.ndarray, n
     if n < 2:
         return empty, empty, True
     extent = (hi - lo).max(axis=1)
-    cell = max(float(np.quantile(extent, 0.9)), 1e-300)
+    cell = max(_quantile_90(extent), 1e-300)
     first = np.floor(lo / cell)
     last = np.floor(hi / cell)
     span = last - first + 1.0  # (n, 2) cells covered along x and y
