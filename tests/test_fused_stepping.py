@@ -125,6 +125,29 @@ def test_pair_buffers_grow_mid_batch_without_changing_a_bit():
     _all_same(reference, got)
 
 
+def test_a_solver_scratch_that_grows_mid_run_gives_the_bits_of_one_sized_generously():
+    # the sequential solver's scratch: too small, the solver asks for more and changes nothing,
+    # the driver undoes the step and the caller grows it and calls again (the staged path
+    # grows it and calls the solver again)
+    scene = _pile("balanced")
+    generous = Simulation(scene)
+    generous._work.solver_table = np.zeros(1_000_000)
+    big = list(generous.run(STEPS))
+
+    tight = Simulation(scene)
+    tight._work.solver_table = np.zeros(1)
+    got, sizes = [], []
+    for _ in range(STEPS // 5):
+        got += list(tight.run(5))
+        sizes.append(tight._work.solver_table.shape[0])
+    assert len(set(sizes)) > 2  # it grew at several points of the run, not once at the start
+    _all_same(big, got)
+
+    staged = Simulation(scene, staged=True)
+    staged._work.solver_table = np.zeros(1)
+    _all_same(big, [staged.step() for _ in range(STEPS)])
+
+
 def _diverging() -> Scene:
     """Boxes in a free fall that passes the divergence bound (1e12 m) within a few steps
     (dt = 2e4 s: WorldSettings built directly, as the scene loader refuses dt > 1 s)."""

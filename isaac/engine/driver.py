@@ -13,10 +13,10 @@ not per stage.
 
 When a step finds more candidate pairs than the scratch holds, or more contact rows than the
 batch has room for, the call puts that step's starting state back and returns, saying how
-much room it needs (`NEED_PAIRS`, `NEED_ROWS`); the caller grows the buffers and calls again
-from that step, so it is computed afresh from its starting state. Buffer sizes never change a
-result (tests compare a run that grew mid-batch with one sized generously from the start).
-Only the solver's table grows in place (`isaac.engine.solver.sequential` returns it).
+much room it needs (`NEED_PAIRS`, `NEED_ROWS`, and `NEED_TABLE` when the sequential solver's
+scratch is too small); the caller grows the buffers and calls again from that step, so it is
+computed afresh from its starting state. Buffer sizes never change a result (tests compare a
+run that grew mid-batch with one sized generously from the start).
 
 Reference counts. numba counts the references to an array with an atomic update (an NRT_incref
 and an NRT_decref, each some 10-20 ns here) whenever a function names an array and then calls
@@ -72,7 +72,7 @@ from isaac.engine.narrow_phase import collide_pairs, match_previous
 from isaac.engine.push_out import push_out
 from isaac.engine.records import CONTACT_FIELDS
 from isaac.engine.solver.seed import solve_seed
-from isaac.engine.solver.sequential import solve_sequential
+from isaac.engine.solver.sequential import grown_scratch, solve_sequential
 
 
 class Bodies(NamedTuple):
@@ -226,6 +226,7 @@ DONE = 0  # every step asked for was taken
 DIVERGED = 1  # a step diverged: it was undone, and `body`, `field` say where
 NEED_PAIRS = 2  # a step found more candidate pairs than the scratch holds: undone
 NEED_ROWS = 3  # a step made more contact rows than the batch holds: undone
+NEED_TABLE = 4  # the sequential solver's scratch (`Workspace.solver_table`) is too small: undone
 
 # what the timed driver (`isaac run --profile`) adds up, in clock[1 + stage] (ns; clock[0]: the
 # whole call): the stages of `isaac.engine.step`, and the driver's own work (saving each step's
@@ -484,7 +485,7 @@ def _run_steps(
                 )  # fmt: skip
             elif not seed and (rows > 0 or n_joints > 0):
                 # (the previous impulses whole: rows name their previous row by index)
-                table = solve_sequential(
+                need = solve_sequential(
                     rows, c_a, c_b, c_feature, c_slot, c_point, c_normal, c_depth, c_previous,
                     position, velocity, angular_velocity, inv_mass, inv_inertia, gravity_dv,
                     restitution, friction, cfg.restitution_rule, cfg.friction_rule,
@@ -492,6 +493,9 @@ def _run_steps(
                     cfg.warm_starting, cfg.h, prev_impulse, prev_tangent, c_impulse, c_tangent,
                     c_restitution, push_a, push_b, table, joint_fields, joint_scratch,
                 )  # fmt: skip
+                if need > 0:
+                    status = NEED_TABLE
+                    break
             if timed:
                 lap = _lap(clock, IMPULSES, lap)
             # 6. integration (the seed's explicit Euler: gravity last), then the joints'
@@ -540,7 +544,7 @@ def _run_steps(
             if timed:
                 lap = _lap(clock, DRIVER, lap)
                 clock[0] += lap - began
-            return status, s, step_carried, body, field, need, table, step_carried
+            return status, s, step_carried, body, field, need, step_carried
         if record:
             _keep_state(batch, start + s, pose, at)
             if n_joints:
@@ -550,7 +554,7 @@ def _run_steps(
             lap = _lap(clock, DRIVER, lap)
     if timed:
         clock[0] += monotonic_ns() - began
-    return DONE, k, carried, -1, -1, 0, table, last_carried
+    return DONE, k, carried, -1, -1, 0, last_carried
 
 
 @numba.njit(cache=True, nogil=True)
@@ -563,10 +567,11 @@ def run_steps_sequential(
 
     Every bundle arrives as a plain tuple of its fields (`Bodies`, `Settings`, `Pose`, `Scratch`,
     `Carry`, `Pose` and `Carry` of the same sizes for undoing a step, `Batch`); table: the
-    solver's table; carried: how many Carry rows are valid; clock: (1 + len(STAGES),) int64,
-    which only the timed drivers write. Returns (status, steps taken, carried, body, field,
-    pairs or rows needed, table, carried at the start of the last step): status DONE, or
-    DIVERGED / NEED_PAIRS / NEED_ROWS with the step that did it undone (body, field:
+    solver's scratch (`isaac.engine.solver.sequential`); carried: how many Carry rows are
+    valid; clock: (1 + len(STAGES),) int64, which only the timed drivers write. Returns (status,
+    steps taken, carried, body, field, pairs, rows or scratch entries needed, carried at the
+    start of the last step): status DONE, or DIVERGED / NEED_PAIRS / NEED_ROWS / NEED_TABLE
+    with the step that did it undone (body, field:
     `first_diverged`'s). On return `saved_pose` / `saved_carry` hold the start of the last step
     taken (or undone), which `Stepper.redo_last` computes again to record it."""
     return _run_steps(
@@ -764,6 +769,8 @@ class Stepper:
                 self._fit()
             elif status == NEED_ROWS:
                 batch = _grown_rows(batch, need)
+            elif status == NEED_TABLE:
+                self.work.solver_table = grown_scratch(self.work.solver_table, need)
             else:
                 if record and taken:
                     at = batch[5][taken]
@@ -780,15 +787,13 @@ class Stepper:
     def _call(self, pose, carry, saved, batch, start, carried, first, k, record, clock=None):
         """One call of the compiled driver with this stepper's bundles (`run_steps_sequential`
         says what each argument is; saved: the (pose, carry) to undo a step with; clock: where
-        a timed driver adds its times, by default this stepper's), keeping the solver table it
-        hands back. Returns (status, steps taken, carried, body, field, needed, carried at the
-        start of the last step)."""
-        status, done, carried, body, field, need, table, last_carried = self.kernel(
+        a timed driver adds its times, by default this stepper's). Returns (status, steps
+        taken, carried, body, field, needed, carried at the start of the last step)."""
+        status, done, carried, body, field, need, last_carried = self.kernel(
             self.bodies, self.settings, pose, self.scratch, carry, saved[0], saved[1], batch,
             self.work.solver_table, start, carried, first, k, record,
             self.clock if clock is None else clock,
         )  # fmt: skip
-        self.work.solver_table = table
         return status, done, carried, body, field, need, last_carried
 
     def redo_last(self, state) -> tuple | None:
@@ -812,6 +817,9 @@ class Stepper:
             )  # fmt: skip
             if status == NEED_ROWS:
                 batch = _grown_rows(batch, need)
+                continue
+            if status == NEED_TABLE:
+                self.work.solver_table = grown_scratch(self.work.solver_table, need)
                 continue
             break
         now = (state.position, state.angle, state.velocity, state.angular_velocity, state.exists)

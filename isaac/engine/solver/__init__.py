@@ -29,7 +29,7 @@ from __future__ import annotations
 
 from isaac.engine.solver.mixing import RULE_CODES
 from isaac.engine.solver.seed import solve_seed
-from isaac.engine.solver.sequential import solve_sequential
+from isaac.engine.solver.sequential import grown_scratch, solve_sequential
 
 __all__ = ["RULE_CODES", "solve_contacts"]
 
@@ -87,7 +87,8 @@ def solve_contacts(
     the arrival velocity at the mirrored position lost 23 %.)
     table: (m,) float64 scratch for the sequential solver, kept by the caller from step to step
     (allocating its several hundred kB afresh every step cost more in page faults than the
-    passes over it); returns it, or a larger replacement when it was too small.
+    passes over it); returns it, or a larger replacement when it was too small (the solver
+    says how much it needs and changes nothing then: it is called again with the larger one).
 
     The two solvers are separate compiled kernels chosen here, so each is compiled only when a
     run first uses it.
@@ -125,39 +126,43 @@ def solve_contacts(
             c_push_b,
         )
         return table
-    return solve_sequential(
-        rows,
-        c_a,
-        c_b,
-        c_feature,
-        c_slot,
-        c_point,
-        c_normal,
-        c_depth,
-        c_previous,
-        position,
-        velocity,
-        angular_velocity,
-        inv_mass,
-        inv_inertia,
-        gravity_dv,
-        restitution,
-        friction,
-        restitution_rule,
-        friction_rule,
-        restitution_threshold,
-        friction_on,
-        iterations,
-        warm_starting,
-        h,
-        prev_impulse,
-        prev_tangent,
-        c_impulse,
-        c_tangent,
-        c_restitution,
-        c_push_a,
-        c_push_b,
-        table,
-        joints,
-        joint_scratch,
-    )
+    while True:
+        need = solve_sequential(
+            rows,
+            c_a,
+            c_b,
+            c_feature,
+            c_slot,
+            c_point,
+            c_normal,
+            c_depth,
+            c_previous,
+            position,
+            velocity,
+            angular_velocity,
+            inv_mass,
+            inv_inertia,
+            gravity_dv,
+            restitution,
+            friction,
+            restitution_rule,
+            friction_rule,
+            restitution_threshold,
+            friction_on,
+            iterations,
+            warm_starting,
+            h,
+            prev_impulse,
+            prev_tangent,
+            c_impulse,
+            c_tangent,
+            c_restitution,
+            c_push_a,
+            c_push_b,
+            table,
+            joints,
+            joint_scratch,
+        )
+        if need == 0:
+            return table
+        table = grown_scratch(table, need)

@@ -42,7 +42,7 @@ from isaac.engine.solver.schedule import (
 )
 
 
-@numba.njit(cache=True, nogil=True, error_model="numpy")
+@numba.njit(cache=True, nogil=True, error_model="numpy", _nrt=False)
 def run_passes(t, kind, successor, groups, iterations):
     """`iterations` Gauss-Seidel passes over the groups of table t; each group's lanes are
     computed side by side (the loops over the lanes are vectorised by the compiler), then hand

@@ -80,7 +80,7 @@ def row_terms(
     return rna, rnb, rta, rtb, kn, kt, mt, target, e, bounce
 
 
-@numba.njit(cache=True, nogil=True)
+@numba.njit(cache=True, nogil=True, _nrt=False)
 def apply_bounce_back(
     rows,
     c_a,

@@ -32,7 +32,11 @@ from isaac.engine import kernel_cache  # noqa: F401  (first: keys the kernels' n
 # b2_maxConditionNumber): k11^2 < MAX_CONDITION * det(K); otherwise point by point
 MAX_CONDITION = 1000.0
 
-LANES = 8
+# 4 lanes, one AVX2 register of float64: the lane loops compile to 4-wide vector code (with 8
+# they came out 2-wide), and a group pads less (pile-100: 174 units in 54 groups of 8, 432
+# lanes, or 65 groups of 4, 260 lanes); its passes took 20 instead of 28 us a sub-step, the same
+# bits (each lane's arithmetic does not depend on the lane count)
+LANES = 4
 UNIT_BLOCK = 0  # a two-point manifold solved as a 2x2 block
 UNIT_POINT = 1  # a single point
 # The group table's columns, each LANES wide, by their offset in a group (column c * LANES): per
@@ -52,10 +56,14 @@ U_LANES = np.uint64(LANES)
 U_2LANES = np.uint64(2 * LANES)
 
 
-@numba.njit(cache=True, nogil=True)
-def schedule(rows, c_a, c_b, c_slot, c_point, c_normal, position, inv, n):
-    """The solver's units in their Gauss-Seidel order, cut into groups of at most LANES
-    independent units of one kind.
+@numba.njit(cache=True, nogil=True, _nrt=False)
+def schedule(
+    rows, c_a, c_b, c_slot, c_point, c_normal, position, inv, n, block, unit, grounded, last, slot,
+    count, first,
+):  # fmt: skip
+    """The solver's units in their Gauss-Seidel order, cut into waves; returns (units, waves,
+    groups): how many units, waves and groups of at most LANES independent units of one kind
+    (`group_lanes` then lays the groups out).
 
     A unit is a two-point manifold whose 2x2 effective mass K is well conditioned (a block,
     by its first row), or a single row. The Gauss-Seidel order is: contacts between moving bodies
@@ -69,17 +77,17 @@ def schedule(rows, c_a, c_b, c_slot, c_point, c_normal, position, inv, n):
     (the order of two units that share no moving body does not change what either computes).
     Concrete bodies never change velocity (their inverse mass and inertia are 0) and do not tie
     units together. Each wave's blocks, then its points, are cut into groups of LANES units.
-    Returns (kind of each group, first row of each lane or -1 for padding, whether each row
-    is the first row of a block).
+    Scratch it fills (int64, from the caller; nothing is allocated): block (rows,): 1 on the
+    first row of a block; unit (rows,): each unit's first row in Gauss-Seidel order; grounded
+    (rows,), last (n,); slot (rows,): each unit's 2 wave + kind; count, first (2 rows,): per
+    (wave, kind) its units and its first group.
     determinism: the waves depend only on the rows, visited in index order.
     """
-    block = np.zeros(rows, dtype=np.bool_)  # the first row of a block
-    unit = np.empty(rows, dtype=np.int64)  # units between moving bodies, then the others
-    grounded = np.empty(rows, dtype=np.int64)  # units with a concrete body
     units = 0
     n_grounded = 0
     skip = False
     for k in range(rows):
+        block[k] = 0
         if skip:  # a block's second row
             skip = False
             continue
@@ -104,7 +112,7 @@ def schedule(rows, c_a, c_b, c_slot, c_point, c_normal, position, inv, n):
             k12 = inv[a, 0] + inv[b, 0] + rna1 * rna2 * inv[a, 1] + rnb1 * rnb2 * inv[b, 1]
             det = k11 * k22 - k12 * k12
             if k11 * k11 < MAX_CONDITION * det:
-                block[k] = True
+                block[k] = 1
                 skip = True
         if inv[a, 0] == 0.0 or inv[b, 0] == 0.0:
             grounded[n_grounded] = k
@@ -115,8 +123,8 @@ def schedule(rows, c_a, c_b, c_slot, c_point, c_normal, position, inv, n):
     for u in range(n_grounded):
         unit[units + u] = grounded[u]
     units += n_grounded
-    last = np.zeros(n, dtype=np.int64)
-    slot = np.empty(units, dtype=np.int64)  # 2 wave + kind
+    for body in range(n):
+        last[body] = 0
     waves = 0
     for u in range(units):
         k = unit[u]
@@ -136,43 +144,51 @@ def schedule(rows, c_a, c_b, c_slot, c_point, c_normal, position, inv, n):
         waves = max(waves, w + 1)
         slot[u] = 2 * w + (UNIT_BLOCK if block[k] else UNIT_POINT)
     # groups per (wave, kind), in wave order, blocks before points
-    count = np.zeros(2 * waves, dtype=np.int64)
+    for s in range(2 * waves):
+        count[s] = 0
     for u in range(units):
         count[slot[u]] += 1
-    first = np.empty(2 * waves, dtype=np.int64)
     groups = 0
     for s in range(2 * waves):
         first[s] = groups
         groups += (count[s] + LANES - 1) // LANES
-    kind = np.empty(groups, dtype=np.int64)
-    lane_row = np.empty(groups * LANES, dtype=np.int64)
-    lane_row[:] = -1
-    count[:] = 0
+    return units, waves, groups
+
+
+@numba.njit(cache=True, nogil=True, _nrt=False)
+def group_lanes(units, waves, unit, slot, count, first, kind, lane_row):
+    """Each group's kind and each lane's first row (-1: padding), from `schedule`'s units and
+    slots, into kind (groups,) and lane_row (groups LANES,)."""
+    for i in range(lane_row.shape[0]):
+        lane_row[i] = -1
+    for s in range(2 * waves):
+        count[s] = 0
     for u in range(units):
         s = slot[u]
         lane = first[s] * LANES + count[s]
         lane_row[lane] = unit[u]
         kind[lane // LANES] = s % 2
         count[s] += 1
-    return kind, lane_row, block
 
 
-@numba.njit(cache=True, nogil=True)
-def layout_table(t, kind, lane_row, rows, c_a, c_b, inv):
+@numba.njit(cache=True, nogil=True, _nrt=False)
+def layout_table(
+    t, kind, lane_row, rows, c_a, c_b, inv, where, successor, first, last, fixed, fixed_body
+):
     """Where each row's columns go (where[k]: its column-0 position), each unit's inverse masses
     and inertias, padding lanes zeroed, and the velocity hand-on: each lane side's successor
     (the velocity columns of the next unit of the same moving body, the body's first unit for
     its last; a sink for concrete bodies and padding), each moving body's first velocity
-    columns, and the concrete bodies' velocity columns (and bodies)."""
+    columns (first, -1 for a body without a unit), and the concrete bodies' velocity columns
+    (fixed) and bodies (fixed_body). Scratch from the caller (nothing is allocated): where
+    (rows,), successor (groups 2 LANES,) uint64, first and last (n,), fixed and fixed_body
+    (groups 2 LANES,). Returns how many of fixed are used."""
     groups = kind.shape[0]
     n = inv.shape[0]
     sink = groups * GROUP_WIDTH  # three columns nothing reads
-    successor = np.empty(groups * 2 * LANES, dtype=np.uint64)
-    where = np.empty(rows, dtype=np.int64)
-    first = np.full(n, -1, dtype=np.int64)
-    last = np.empty(n, dtype=np.int64)  # the successor entry of a body's last unit so far
-    fixed = np.empty(groups * 2 * LANES, dtype=np.int64)
-    fixed_body = np.empty(groups * 2 * LANES, dtype=np.int64)
+    for body in range(n):
+        first[body] = -1
+    # last[body]: the successor entry of a body's last unit so far
     n_fixed = 0
     for g in range(groups):
         base = g * GROUP_WIDTH
@@ -211,4 +227,4 @@ def layout_table(t, kind, lane_row, rows, c_a, c_b, inv):
     for body in range(n):
         if first[body] >= 0:
             successor[last[body]] = first[body]  # the next pass
-    return where, successor, first, fixed[:n_fixed], fixed_body[:n_fixed]
+    return n_fixed

@@ -32,12 +32,34 @@ from isaac.engine.solver.schedule import (
     R_TG,
     ROW2,
     UNIT_BLOCK,
+    group_lanes,
     layout_table,
     schedule,
 )
 
+# The solver's scratch: one float64 array the caller keeps from step to step (`table`), carved
+# into every per-step array the solver uses, so that a step allocates nothing (an np.empty is an
+# allocation and two reference-count updates; the solver took 22 a sub-step). Its fixed part
+# (sized by rows and bodies): the velocities v (n, 3) and inverse masses (n, 2), bounce-back
+# distances (rows,), warm-start impulses (rows, 4), then int64 columns (9 rows + 4 n, below);
+# at FIXED_PART's end (a multiple of LANES) the group table (groups GROUP_WIDTH + 3 LANES, the
+# last three LANES a sink) and the groups' int64 columns (groups (1 + 7 LANES)).
 
-@numba.njit(cache=True, nogil=True)
+
+@numba.njit(cache=True, nogil=True, _nrt=False, inline="always")
+def _fixed_part(rows, n):
+    """float64 entries of the scratch before the group table, a multiple of LANES."""
+    size = 5 * n + 5 * rows + 9 * rows + 4 * n
+    return (size + LANES - 1) // LANES * LANES
+
+
+@numba.njit(cache=True, nogil=True, _nrt=False, inline="always")
+def _group_part(groups):
+    """float64 entries of the group table and the groups' int64 columns."""
+    return groups * GROUP_WIDTH + 3 * LANES + groups * (1 + 7 * LANES)
+
+
+@numba.njit(cache=True, nogil=True, _nrt=False)
 def solve_sequential(
     rows,
     c_a,
@@ -82,35 +104,68 @@ def solve_sequential(
     contacts' pass, then the joints' (their impulses accumulate in jt). Without joints
     (jt has no rows) the passes run as before, all at once.
 
-    Lays the group table of schedule's groups out in `table` (or a larger one, returned) and
-    fills it with each row's terms, applies the warm-start impulses (last step's accumulated
-    impulses of the same contact points, in row order), runs the passes, and writes the
-    accumulated impulses to c_impulse / c_tangent. (Several small kernels rather than one: numba
-    compiles them in a fraction of the time.)
+    table: (m,) float64 scratch, kept by the caller (see above); the solver allocates nothing.
+    Returns 0 when it solved, or, when `table` is too small, the size it needs (at least; the
+    caller grows it and calls again): then it has changed nothing, no velocity, no row, so
+    the call can simply be repeated, and results never depend on the scratch's size.
+
+    Schedules the units, lays the group table of schedule's groups out and fills it with each
+    row's terms, applies the warm-start impulses (last step's accumulated impulses of the same
+    contact points, in row order), runs the passes, and writes the accumulated impulses to
+    c_impulse / c_tangent. (Several small kernels rather than one: numba compiles them in a
+    fraction of the time. _nrt=False: no reference counts, as the driver's stage kernels.)
     """
     n_joints = jt.shape[0]
     if rows == 0 and n_joints == 0:  # nothing to solve: the velocities stay as they are
-        return table
-    J = Joints(*joints)
+        return 0
     n = velocity.shape[0]
-    v = np.empty((n, 3))  # the velocities (vx, vy, w) and inverse masses, packed per body
-    inv = np.empty((n, 2))
+    fixed_size = _fixed_part(rows, n)
+    if table.shape[0] < fixed_size:  # (a first guess at the groups; a retry may ask more)
+        return fixed_size + _group_part(rows // LANES + 1)
+    J = Joints(*joints)
+    v = table[: 3 * n].reshape((n, 3))  # the velocities (vx, vy, w), packed per body
+    inv = table[3 * n : 5 * n].reshape((n, 2))  # and the inverse masses
+    bounce_back = table[5 * n : 5 * n + rows]  # (1 + e u_b / u) g of rows that bounce (m)
+    warm = table[5 * n + rows : 5 * n + 5 * rows].reshape((rows, 4))
+    ints = table[5 * n + 5 * rows : 5 * n + 5 * rows + 9 * rows + 4 * n].view(np.int64)
+    block = ints[:rows]
+    unit = ints[rows : 2 * rows]
+    grounded = ints[2 * rows : 3 * rows]
+    slot = ints[3 * rows : 4 * rows]
+    where = ints[4 * rows : 5 * rows]
+    count = ints[5 * rows : 7 * rows]
+    first_group = ints[7 * rows : 9 * rows]
+    last = ints[9 * rows : 9 * rows + n]
+    first = ints[9 * rows + n : 9 * rows + 2 * n]
+    units_of = ints[9 * rows + 2 * n : 9 * rows + 3 * n]
+    for i in range(n):
+        inv[i, 0] = inv_mass[i]
+        inv[i, 1] = inv_inertia[i]
+    units, waves, groups = schedule(
+        rows, c_a, c_b, c_slot, c_point, c_normal, position, inv, n, block, unit, grounded, last,
+        slot, count, first_group,
+    )  # fmt: skip
+    need = fixed_size + _group_part(groups)
+    if table.shape[0] < need:
+        return need
     for i in range(n):
         v[i, 0] = velocity[i, 0]
         v[i, 1] = velocity[i, 1]
         v[i, 2] = angular_velocity[i]
-        inv[i, 0] = inv_mass[i]
-        inv[i, 1] = inv_inertia[i]
-    kind, lane_row, block = schedule(rows, c_a, c_b, c_slot, c_point, c_normal, position, inv, n)
-    groups = kind.shape[0]
-    if table.shape[0] < groups * GROUP_WIDTH + 3 * LANES:
-        table = np.empty(2 * (groups * GROUP_WIDTH + 3 * LANES))
-    where, successor, first, fixed, fixed_body = layout_table(
-        table, kind, lane_row, rows, c_a, c_b, inv
+    end = fixed_size + groups * GROUP_WIDTH + 3 * LANES
+    t = table[fixed_size:end]
+    kind = table[end : end + groups].view(np.int64)
+    lane_row = table[end + groups : end + groups + groups * LANES].view(np.int64)
+    at = end + groups + groups * LANES
+    successor = table[at : at + groups * 2 * LANES].view(np.uint64)
+    fixed = table[at + groups * 2 * LANES : at + groups * 4 * LANES].view(np.int64)
+    fixed_body = table[at + groups * 4 * LANES : at + groups * 6 * LANES].view(np.int64)
+    group_lanes(units, waves, unit, slot, count, first_group, kind, lane_row)
+    n_fixed = layout_table(
+        t, kind, lane_row, rows, c_a, c_b, inv, where, successor, first, last, fixed, fixed_body
     )
-    bounce_back = np.zeros(rows)  # (1 + e u_b / u) g of speculative rows that bounce (m)
-    warm = fill_rows(
-        table,
+    fill_rows(
+        t,
         where,
         block,
         rows,
@@ -136,8 +191,8 @@ def solve_sequential(
         prev_tangent,
         c_restitution,
         bounce_back,
+        warm,
     )
-    t = table
     if warm_starting:
         # applied in row order: -P to a, +P to b
         for k in range(rows):
@@ -157,7 +212,7 @@ def solve_sequential(
         warm_start_joints(J, jt, v, inv)
     # the velocities into each moving body's first unit and every unit side with a concrete body
     _to_first_units(t, first, v)
-    for f in range(fixed.shape[0]):
+    for f in range(n_fixed):
         _put_velocity(t, fixed[f], v, fixed_body[f])
 
     if n_joints == 0:
@@ -166,7 +221,7 @@ def solve_sequential(
         # after each pass the velocities are back in each body's first unit (its successor);
         # handed between the units and v for the bodies that have a unit alone (`units`), not
         # for every body each iteration (the 100 x 100 joint grid has 10,000 bodies, no contact)
-        units = _bodies_with_units(first)
+        units = units_of[: _bodies_with_units(first, units_of)]
         for _ in range(iterations):
             run_passes(t, kind, successor, groups, 1)
             _from_units(t, first, v, units)
@@ -205,7 +260,7 @@ def solve_sequential(
         c_push_a,
         c_push_b,
     )
-    return table
+    return 0
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
@@ -223,19 +278,14 @@ def _from_first_units(t, first, v):
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
-def _bodies_with_units(first):
-    """The bodies (ascending) whose first unit `first` gives (>= 0)."""
-    count = 0
-    for body in range(first.shape[0]):
-        if first[body] >= 0:
-            count += 1
-    units = np.empty(count, dtype=np.int64)
+def _bodies_with_units(first, units):
+    """The bodies (ascending) whose first unit `first` gives (>= 0), into units; how many."""
     count = 0
     for body in range(first.shape[0]):
         if first[body] >= 0:
             units[count] = body
             count += 1
-    return units
+    return count
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
@@ -268,7 +318,7 @@ def _get_velocity(t, at, v, body):
     v[body, 2] = t[at + 2 * LANES]
 
 
-@numba.njit(cache=True, nogil=True)
+@numba.njit(cache=True, nogil=True, _nrt=False)
 def fill_rows(
     t,
     where,
@@ -296,12 +346,12 @@ def fill_rows(
     prev_tangent,
     c_restitution,
     bounce_back,
+    warm,
 ):
     """Each row's terms into its table columns, in row order, with a block's K12 and K^-1;
     the restitution used and the bounce-back distances; and the warm-start impulse (last
-    step's accumulated impulses of the same contact point) as it will be applied: returns
-    (rows, 4) P = (px, py) and the torques r x P of a and b."""
-    warm = np.empty((rows, 4))
+    step's accumulated impulses of the same contact point) as it will be applied, into warm
+    (rows, 4): P = (px, py) and the torques r x P of a and b."""
     rna1 = 0.0
     rnb1 = 0.0
     kn1 = 0.0
@@ -388,4 +438,10 @@ def fill_rows(
         rna1 = rna
         rnb1 = rnb
         kn1 = kn
-    return warm
+
+
+def grown_scratch(table: np.ndarray, need: int) -> np.ndarray:
+    """A new solver scratch for one that was `need` entries too short (solve_sequential's
+    answer): twice that, so that a growing scene seldom asks again. Its contents do not matter
+    (the solver writes every entry it reads), zeros only for tidiness."""
+    return np.zeros(max(2 * need, table.shape[0]))
