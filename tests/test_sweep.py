@@ -787,3 +787,44 @@ def test_a_generator_option_is_swept_by_index_and_equal_seeds_give_equal_runs(tm
     # 6 moving polygons (at most 8: each gets final-state columns), the concrete container none
     bodies = {k.split(".")[1] for k in rows[0] if k.startswith("final.")}
     assert bodies == {f"pile/{i}" for i in range(1, 7)}
+
+
+def test_a_chunk_stopped_before_its_logs_were_moved_into_place_keeps_its_runs_on_resume(tmp_path):
+    # a chunk's logs are closed without an fsync and moved to their final names only after one
+    # sync at the chunk's end (worker.publish_logs); a chunk stopped before that (worker
+    # killed, Ctrl-C) left its rows and its finished logs in logs/.tmp: they are kept
+    import json
+
+    from isaac.app.sweep import table as results
+    from isaac.app.sweep import worker as work
+    from isaac.app.sweep.command import _tasks
+
+    path = _write(
+        tmp_path, BOUNCE_SWEEP.format(scene=SCENES / "bounce.yaml", steps=20, record="mcap")
+    )
+    sweep = load_sweep(str(path))
+    out = str(tmp_path / "o")
+    work.prepare_out(sweep, out)
+    task = _tasks(sweep, [[0, 1, 2]], out)[0]
+    moves: list = []
+    rows = [work.run_one(task, sweep, i, moves=moves) for i in task["runs"]]
+    Path(work.rows_path(out, 0)).write_text("".join(json.dumps(r) + "\n" for r in rows))
+    assert [r["log_path"] for r in rows] == [f"logs/run-00000{i}.mcap" for i in range(3)]
+    assert len(moves) == 3 and not any(os.path.exists(final) for _, final in moves)
+    kept = results.kept_rows(out, sweep.n_runs, results.schema(sweep))
+    assert sorted(kept) == [0, 1, 2]
+    for r in rows:
+        final = Path(out) / r["log_path"]
+        assert hashlib.sha256(final.read_bytes()).hexdigest() == r["log_sha256"]
+    assert not any(os.path.exists(tmp) for tmp, _ in moves)
+    # a chunk that runs to its end moves its logs itself: the same bytes as run one by one
+    done = work.run_chunk(_tasks(sweep, [[3, 4]], out)[0], sweep)
+    alone = str(tmp_path / "alone")
+    work.prepare_out(sweep, alone)
+    for r in done:
+        assert r["status"] == "ok"
+        again = work.run_one(_tasks(sweep, [[r["index"]]], alone)[0], sweep, r["index"])
+        assert again["log_sha256"] == r["log_sha256"]
+        final = Path(out) / r["log_path"]
+        assert hashlib.sha256(final.read_bytes()).hexdigest() == r["log_sha256"]
+    assert sorted(os.listdir(Path(out) / "logs" / ".tmp")) == []
