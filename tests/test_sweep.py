@@ -104,7 +104,7 @@ def test_table_and_logs_are_the_same_with_one_and_two_workers_and_any_chunking(t
     first_worker = sorted(client.scheduler_info()["workers"])[0]
     with dask.annotate(workers=[first_worker], allow_other_workers=False):
         one = execute(str(sweep), str(tmp_path / "one"), client=client, chunk=7, plots=False)
-    # the default: chunks that shrink towards the end (_guided_chunks)
+    # the default: rounds of chunks that shrink towards the end (_round_chunks)
     guided = execute(str(sweep), str(tmp_path / "guided"), client=client, plots=False)
     assert _comparable(guided.table) == _comparable(two.table)
     assert _log_bytes(guided.out) == _log_bytes(two.out)
@@ -135,22 +135,36 @@ def test_table_and_logs_are_the_same_with_one_and_two_workers_and_any_chunking(t
 
 
 @pytest.mark.parametrize(
-    "runs, workers, least", [(1000, 2, 20), (1000, 1, 20), (100, 2, 1), (5, 4, 1)]
+    "runs, workers, least",
+    [(1000, 2, 20), (1000, 1, 20), (100, 2, 1), (5, 4, 1), (3, 2, 1), (1, 2, 20), (997, 3, 20)],
 )
-def test_guided_chunks_cover_every_run_once_in_order_and_shrink_to_the_least(runs, workers, least):
-    from isaac.app.sweep.command import MAX_CHUNK, TASKS_PER_WORKER, _guided_chunks
+def test_chunks_come_in_rounds_of_one_equal_chunk_per_worker_and_end_evenly(runs, workers, least):
+    from isaac.app.sweep.command import MAX_CHUNK, TASKS_PER_WORKER, _round_chunks
 
     todo = list(range(3, 3 + runs))
-    chunks = _guided_chunks(todo, workers, least)
-    assert [i for c in chunks for i in c] == todo
+    chunks = _round_chunks(todo, workers, least)
+    assert chunks == _round_chunks(list(todo), workers, least)  # a function of its inputs
+    assert [i for c in chunks for i in c] == todo  # every run once, in order
     sizes = [len(c) for c in chunks]
-    assert all(a >= b for a, b in zip(sizes, sizes[1:-1]))  # the very last may be a remainder
-    assert max(sizes) <= MAX_CHUNK and min(sizes[:-1], default=least) >= least
-    # each chunk is at most the runs left over TASKS_PER_WORKER x workers (or the least)
+    assert min(sizes) >= 1 and max(sizes) <= MAX_CHUNK
+    # the last round: the runs left split evenly over the workers (no lone tail chunk)
+    last = min(workers, runs)
+    tail, rounds = sizes[-last:], sizes[:-last]
+    assert max(tail) - min(tail) <= 1
+    # before it, whole rounds of equal chunks, shrinking, each the runs left over
+    # TASKS_PER_WORKER x workers (over the least: else it would have been the last round)
+    assert len(rounds) % workers == 0
     left = runs
-    for size in sizes:
-        assert size <= max(least, -(-left // (TASKS_PER_WORKER * workers)))
-        left -= size
+    previous = MAX_CHUNK
+    for k in range(0, len(rounds), workers):
+        size = rounds[k]
+        assert rounds[k : k + workers] == [size] * workers
+        assert least < size == min(MAX_CHUNK, -(-left // (TASKS_PER_WORKER * workers)))
+        assert size <= previous
+        previous = size
+        left -= size * workers
+    assert sum(tail) == left
+    assert min(MAX_CHUNK, -(-left // (TASKS_PER_WORKER * workers))) <= least
 
 
 def test_resume_keeps_complete_runs_and_redoes_the_others(tmp_path, cluster):
