@@ -842,3 +842,44 @@ def test_a_chunk_stopped_before_its_logs_were_moved_into_place_keeps_its_runs_on
         final = Path(out) / r["log_path"]
         assert hashlib.sha256(final.read_bytes()).hexdigest() == r["log_sha256"]
     assert sorted(os.listdir(Path(out) / "logs" / ".tmp")) == []
+
+
+@pytest.mark.slow
+def test_ctrl_c_while_the_local_cluster_starts_stops_cleanly_without_a_traceback(tmp_path):
+    # Ctrl-C reaches every process of the terminal's group: here once the workers have started
+    # and before they are told to leave it to the client (the plugin), the moment a traceback
+    # came from (the workers', and the client's, which left the cluster running)
+    sweep = _write(
+        tmp_path, BOUNCE_SWEEP.format(scene=SCENES / "bounce.yaml", steps=20, record="none")
+    )
+    code = textwrap.dedent(
+        f"""\
+        import os, signal, sys, time
+        sys.argv[0] = "/usr/bin/isaac"
+        from isaac.app.cli import main
+        import distributed
+
+        register = distributed.Client.register_plugin
+
+        def interrupted(self, *args, **kwargs):
+            os.killpg(os.getpgrp(), signal.SIGINT)
+            time.sleep(2.0)  # the workers and this process have had it
+            return register(self, *args, **kwargs)
+
+        distributed.Client.register_plugin = interrupted
+        sys.exit(main(["sweep", {str(sweep)!r}, "--out", {str(tmp_path / "o")!r},
+                       "--workers", "2", "--quiet", "--no-plots"]))
+        """
+    )
+    proc = subprocess.run(
+        [sys.executable, "-c", code],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=300,
+        start_new_session=True,  # its own process group: the signal stays in it
+    )
+    assert proc.returncode == 130, proc.stderr
+    assert "Traceback" not in proc.stderr, proc.stderr
+    assert proc.stderr.strip().splitlines()[-1].startswith("isaac sweep: interrupted")
+    assert not (tmp_path / "o" / "runs.parquet").exists()
