@@ -233,8 +233,9 @@ class _RowFile:
 class Clock:
     """Wall seconds of each part of the runs timed with it, summed (bench/sweep.py reports them
     per run): scene (loading a run's scene, when the run does it itself), build (the
-    Simulation and the metrics' start), simulate (the compiled batches), record (the recorder:
-    open, write, close, rename, sha256), metrics, row (the row's line appended)."""
+    Simulation: the engine's model and state), simulate (the compiled batches), record (the
+    recorder: open, write, close, sha256; and the chunk's one sync and renames at its end),
+    metrics (their start, each batch's share and the values), row (the row's line appended)."""
 
     PARTS = ("scene", "build", "simulate", "record", "metrics", "row")
 
@@ -419,8 +420,9 @@ def run_one(
             )
         clock.lap("scene")
         sim = Simulation(scene)
-        measure = Measure(sim, task["metrics"], task["final_bodies"])
         clock.lap("build")
+        measure = Measure(sim, task["metrics"], task["final_bodies"])
+        clock.lap("metrics")
         if tmp:
             from recorder import Recorder
 
