@@ -341,6 +341,15 @@ def _check_on_cluster(client, sweep_f, sweep, todo_chunks, kept, checked) -> tup
     return loads, client.map(work.chunk_summary, loads + checks, pure=False)
 
 
+def _take_rows(client, futures: list, done: dict) -> None:
+    """The rows of the run tasks `futures` that finished, into `done` {index: row}; one gather
+    (a message per worker holding some)."""
+    ok = [f for f in futures if f.status == "finished"]
+    for rows in client.gather(ok, errors="skip"):
+        for row in rows:
+            done[row["index"]] = row
+
+
 def _fan_out(sweep, todo, out, done, pre, client, scheduler, workers, chunk, progress, phases):
     """Steps 3 to 5; fills `done` {index: row} and `phases` (seconds). Returns (interrupted,
     workers used)."""
@@ -410,15 +419,20 @@ def _fan_out(sweep, todo, out, done, pre, client, scheduler, workers, chunk, pro
         # the rows stay on the workers until every chunk is done and then come in one gather
         # (a message per worker): fetching each chunk's rows as it finished cost this process
         # and the workers about 2.5 ms of CPU a chunk, taken from the runs on a 2-core machine
-        finished = []
+        # ... except that once no more than the last round is running (a chunk a worker at
+        # most), the rows of the chunks finished so far are fetched while it runs: the gather
+        # at the end then waits for the last chunks' rows alone
+        finished, fetched = [], 0
+        left = len(futures) - 1
         for future in as_completed(futures[:-1]):
             finished.append(future)
+            left -= 1
             if bar is not None:
                 bar.update(len(tasks[by_future[future.key]]["runs"]))
-        ok = [f for f in finished if f.status == "finished"]
-        for rows in client.gather(ok, errors="skip"):
-            for row in rows:
-                done[row["index"]] = row
+            if 0 < left <= n_workers and fetched == 0:
+                fetched = len(finished)
+                _take_rows(client, finished, done)
+        _take_rows(client, finished[fetched:], done)
         for future in finished:
             task = tasks[by_future[future.key]]
             if all(i in done for i in task["runs"]):
