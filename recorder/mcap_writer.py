@@ -781,9 +781,20 @@ class McapLogWriter:
             self._thread = None
 
     def close(
-        self, *, complete: bool = True, stopped_at: int | None = None, reason: str | None = None
+        self,
+        *,
+        complete: bool = True,
+        stopped_at: int | None = None,
+        reason: str | None = None,
+        sync: bool = True,
     ) -> str:
-        """Finish the file (end metadata, summary, index) and rename it; returns the final path."""
+        """Finish the file (end metadata, summary, index) and rename it; returns the final path.
+
+        sync: fsync the file before the rename (default), so that the final name never holds a
+            half-written log, even after a power loss. False: the caller makes the file durable
+            itself before it gives the file a name that says it is complete (`isaac sweep`
+            syncs a chunk's logs at once, then moves them: isaac.app.sweep.worker).
+        """
         if self._closed:
             return self.path
         self._closed = True
@@ -804,7 +815,8 @@ class McapLogWriter:
         )
         self._writer.finish()
         self._file.flush()
-        os.fsync(self._file.fileno())
+        if sync:
+            os.fsync(self._file.fileno())
         self._file.close()
         os.replace(self.partial_path, self.path)
         return self.path

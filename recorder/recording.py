@@ -387,7 +387,12 @@ class Recorder:
             )
 
     def close(
-        self, complete: bool = True, stopped_at: int | None = None, reason: str | None = None
+        self,
+        complete: bool = True,
+        stopped_at: int | None = None,
+        reason: str | None = None,
+        *,
+        sync: bool = True,
     ) -> dict[str, str]:
         """Finish both files cleanly (keeping every step written) and rename them.
 
@@ -395,6 +400,9 @@ class Recorder:
             ``reason`` are written into the log. stopped_at: the last step whose state is in the
             log, the meaning `isaac run`, `inspect` and `recover` give "stopped at step K"
             (default: the last recorded step).
+        sync: False skips the fsync of an MCAP file written in this process (offload "none" or
+            "thread") before its rename: for a caller that syncs many files at once and only
+            then gives them their final names (`isaac sweep`). Writer processes sync as always.
         Returns {"mcap": path, "rrd": path} for the files written.
         With ``ISAAC_TEST_CLOSE_GATE`` set (tests only), first waits on that FIFO.
         """
@@ -412,8 +420,13 @@ class Recorder:
             if writer is None:
                 continue
             try:
+                extra = (
+                    {}
+                    if sync or self._modes.get(key) == "process" or key != "mcap"
+                    else {"sync": False}
+                )
                 self.paths[key] = writer.close(
-                    complete=complete, stopped_at=stopped_at, reason=reason
+                    complete=complete, stopped_at=stopped_at, reason=reason, **extra
                 )
             except Exception as exc:  # noqa: BLE001 - close the other file, then report
                 errors.append(f"{key}: {exc}")

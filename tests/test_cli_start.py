@@ -42,3 +42,39 @@ def test_a_command_imports_its_own_module_alone():
     )
     assert proc.returncode == 0, proc.stderr
     assert proc.stdout.strip().splitlines()[-1] == "['isaac.app.cli', 'isaac.app.run']"
+
+
+def _python(code: str) -> subprocess.CompletedProcess:
+    return subprocess.run(
+        [sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=300
+    )
+
+
+def test_ctrl_c_while_the_command_imports_its_modules_says_one_line_and_exits_130():
+    # as the console script does: argv[0] is `isaac`; the signal comes right after the command
+    # line's module is imported, before `main` runs (its handler raises at the next line)
+    proc = _python(
+        "import os, signal, sys, time; sys.argv[0] = '/usr/bin/isaac'; "
+        "from isaac.app.cli import main; os.kill(os.getpid(), signal.SIGINT); time.sleep(30)"
+    )
+    assert proc.returncode == 130, proc.stderr
+    assert proc.stderr == "isaac: interrupted\n"
+
+
+def test_ctrl_c_while_main_imports_the_sub_command_says_one_line_and_exits_130():
+    proc = _python(
+        "import os, signal, sys, time; sys.argv[0] = '/usr/bin/isaac'; "
+        "import isaac.app.cli as cli\n"
+        "def slow_parser(command):\n"
+        "    os.kill(os.getpid(), signal.SIGINT); time.sleep(30)\n"
+        "cli.build_parser = slow_parser\n"
+        "sys.exit(cli.main(['check', 'scenes/bounce.yaml']))"
+    )
+    assert proc.returncode == 130, proc.stderr
+    assert proc.stderr == "isaac check: interrupted\n"
+
+
+def test_a_program_that_imports_the_command_line_keeps_its_own_ctrl_c():
+    proc = _python("import sys; import isaac.app.cli; print(sys.excepthook is sys.__excepthook__)")
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stdout.strip() == "True"

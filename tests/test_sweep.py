@@ -104,7 +104,7 @@ def test_table_and_logs_are_the_same_with_one_and_two_workers_and_any_chunking(t
     first_worker = sorted(client.scheduler_info()["workers"])[0]
     with dask.annotate(workers=[first_worker], allow_other_workers=False):
         one = execute(str(sweep), str(tmp_path / "one"), client=client, chunk=7, plots=False)
-    # the default: chunks that shrink towards the end (_guided_chunks)
+    # the default: rounds of chunks that shrink towards the end (_round_chunks)
     guided = execute(str(sweep), str(tmp_path / "guided"), client=client, plots=False)
     assert _comparable(guided.table) == _comparable(two.table)
     assert _log_bytes(guided.out) == _log_bytes(two.out)
@@ -135,22 +135,36 @@ def test_table_and_logs_are_the_same_with_one_and_two_workers_and_any_chunking(t
 
 
 @pytest.mark.parametrize(
-    "runs, workers, least", [(1000, 2, 20), (1000, 1, 20), (100, 2, 1), (5, 4, 1)]
+    "runs, workers, least",
+    [(1000, 2, 20), (1000, 1, 20), (100, 2, 1), (5, 4, 1), (3, 2, 1), (1, 2, 20), (997, 3, 20)],
 )
-def test_guided_chunks_cover_every_run_once_in_order_and_shrink_to_the_least(runs, workers, least):
-    from isaac.app.sweep.command import MAX_CHUNK, TASKS_PER_WORKER, _guided_chunks
+def test_chunks_come_in_rounds_of_one_equal_chunk_per_worker_and_end_evenly(runs, workers, least):
+    from isaac.app.sweep.command import MAX_CHUNK, TASKS_PER_WORKER, _round_chunks
 
     todo = list(range(3, 3 + runs))
-    chunks = _guided_chunks(todo, workers, least)
-    assert [i for c in chunks for i in c] == todo
+    chunks = _round_chunks(todo, workers, least)
+    assert chunks == _round_chunks(list(todo), workers, least)  # a function of its inputs
+    assert [i for c in chunks for i in c] == todo  # every run once, in order
     sizes = [len(c) for c in chunks]
-    assert all(a >= b for a, b in zip(sizes, sizes[1:-1]))  # the very last may be a remainder
-    assert max(sizes) <= MAX_CHUNK and min(sizes[:-1], default=least) >= least
-    # each chunk is at most the runs left over TASKS_PER_WORKER x workers (or the least)
+    assert min(sizes) >= 1 and max(sizes) <= MAX_CHUNK
+    # the last round: the runs left split evenly over the workers (no lone tail chunk)
+    last = min(workers, runs)
+    tail, rounds = sizes[-last:], sizes[:-last]
+    assert max(tail) - min(tail) <= 1
+    # before it, whole rounds of equal chunks, shrinking, each the runs left over
+    # TASKS_PER_WORKER x workers (over the least: else it would have been the last round)
+    assert len(rounds) % workers == 0
     left = runs
-    for size in sizes:
-        assert size <= max(least, -(-left // (TASKS_PER_WORKER * workers)))
-        left -= size
+    previous = MAX_CHUNK
+    for k in range(0, len(rounds), workers):
+        size = rounds[k]
+        assert rounds[k : k + workers] == [size] * workers
+        assert least < size == min(MAX_CHUNK, -(-left // (TASKS_PER_WORKER * workers)))
+        assert size <= previous
+        previous = size
+        left -= size * workers
+    assert sum(tail) == left
+    assert min(MAX_CHUNK, -(-left // (TASKS_PER_WORKER * workers))) <= least
 
 
 def test_resume_keeps_complete_runs_and_redoes_the_others(tmp_path, cluster):
@@ -787,3 +801,85 @@ def test_a_generator_option_is_swept_by_index_and_equal_seeds_give_equal_runs(tm
     # 6 moving polygons (at most 8: each gets final-state columns), the concrete container none
     bodies = {k.split(".")[1] for k in rows[0] if k.startswith("final.")}
     assert bodies == {f"pile/{i}" for i in range(1, 7)}
+
+
+def test_a_chunk_stopped_before_its_logs_were_moved_into_place_keeps_its_runs_on_resume(tmp_path):
+    # a chunk's logs are closed without an fsync and moved to their final names only after one
+    # sync at the chunk's end (worker.publish_logs); a chunk stopped before that (worker
+    # killed, Ctrl-C) left its rows and its finished logs in logs/.tmp: they are kept
+    import json
+
+    from isaac.app.sweep import table as results
+    from isaac.app.sweep import worker as work
+    from isaac.app.sweep.command import _tasks
+
+    path = _write(
+        tmp_path, BOUNCE_SWEEP.format(scene=SCENES / "bounce.yaml", steps=20, record="mcap")
+    )
+    sweep = load_sweep(str(path))
+    out = str(tmp_path / "o")
+    work.prepare_out(sweep, out)
+    task = _tasks(sweep, [[0, 1, 2]], out)[0]
+    moves: list = []
+    rows = [work.run_one(task, sweep, i, moves=moves) for i in task["runs"]]
+    Path(work.rows_path(out, 0)).write_text("".join(json.dumps(r) + "\n" for r in rows))
+    assert [r["log_path"] for r in rows] == [f"logs/run-00000{i}.mcap" for i in range(3)]
+    assert len(moves) == 3 and not any(os.path.exists(final) for _, final in moves)
+    kept = results.kept_rows(out, sweep.n_runs, results.schema(sweep))
+    assert sorted(kept) == [0, 1, 2]
+    for r in rows:
+        final = Path(out) / r["log_path"]
+        assert hashlib.sha256(final.read_bytes()).hexdigest() == r["log_sha256"]
+    assert not any(os.path.exists(tmp) for tmp, _ in moves)
+    # a chunk that runs to its end moves its logs itself: the same bytes as run one by one
+    done = work.run_chunk(_tasks(sweep, [[3, 4]], out)[0], sweep)
+    alone = str(tmp_path / "alone")
+    work.prepare_out(sweep, alone)
+    for r in done:
+        assert r["status"] == "ok"
+        again = work.run_one(_tasks(sweep, [[r["index"]]], alone)[0], sweep, r["index"])
+        assert again["log_sha256"] == r["log_sha256"]
+        final = Path(out) / r["log_path"]
+        assert hashlib.sha256(final.read_bytes()).hexdigest() == r["log_sha256"]
+    assert sorted(os.listdir(Path(out) / "logs" / ".tmp")) == []
+
+
+@pytest.mark.slow
+def test_ctrl_c_while_the_local_cluster_starts_stops_cleanly_without_a_traceback(tmp_path):
+    # Ctrl-C reaches every process of the terminal's group: here once the workers have started
+    # and before they are told to leave it to the client (the plugin), the moment a traceback
+    # came from (the workers', and the client's, which left the cluster running)
+    sweep = _write(
+        tmp_path, BOUNCE_SWEEP.format(scene=SCENES / "bounce.yaml", steps=20, record="none")
+    )
+    code = textwrap.dedent(
+        f"""\
+        import os, signal, sys, time
+        sys.argv[0] = "/usr/bin/isaac"
+        from isaac.app.cli import main
+        import distributed
+
+        register = distributed.Client.register_plugin
+
+        def interrupted(self, *args, **kwargs):
+            os.killpg(os.getpgrp(), signal.SIGINT)
+            time.sleep(2.0)  # the workers and this process have had it
+            return register(self, *args, **kwargs)
+
+        distributed.Client.register_plugin = interrupted
+        sys.exit(main(["sweep", {str(sweep)!r}, "--out", {str(tmp_path / "o")!r},
+                       "--workers", "2", "--quiet", "--no-plots"]))
+        """
+    )
+    proc = subprocess.run(
+        [sys.executable, "-c", code],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=300,
+        start_new_session=True,  # its own process group: the signal stays in it
+    )
+    assert proc.returncode == 130, proc.stderr
+    assert "Traceback" not in proc.stderr, proc.stderr
+    assert proc.stderr.strip().splitlines()[-1].startswith("isaac sweep: interrupted")
+    assert not (tmp_path / "o" / "runs.parquet").exists()

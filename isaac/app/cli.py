@@ -7,12 +7,40 @@ turned into one line on stderr and its exit status; no traceback reaches the use
 
 from __future__ import annotations
 
-import argparse
-import importlib
-import os
 import sys
 
-from isaac.errors import IsaacError
+
+def _interrupted_at_start(kind, value, tb, _previous=sys.excepthook) -> None:
+    """sys.excepthook while this module and `main` run: Ctrl-C before `main` catches it (in the
+    first few hundred ms of a command: its imports) says one line and exits with status 130, as
+    `main` does, instead of printing the interrupted import's traceback."""
+    if not issubclass(kind, KeyboardInterrupt):
+        _previous(kind, value, tb)
+        return
+    import os
+
+    try:
+        print("isaac: interrupted", file=sys.stderr, flush=True)
+    finally:
+        os._exit(130)  # not Python's own exit: a second traceback could come from its clean-up
+
+
+def _is_the_command() -> bool:
+    """Whether this process is the `isaac` command (its console script, or `python -m isaac`),
+    not a program that imports this module (whose Ctrl-C is its own)."""
+    argv0 = (getattr(sys, "argv", None) or [""])[0].replace("\\", "/")
+    return argv0.rsplit("/", 1)[-1] == "isaac" or argv0.endswith("isaac/__main__.py")
+
+
+# first, before the other imports: the console script imports this module, then calls `main`
+if _is_the_command():
+    sys.excepthook = _interrupted_at_start
+
+import argparse  # noqa: E402 - after the hook, which covers these imports
+import importlib  # noqa: E402
+import os  # noqa: E402
+
+from isaac.errors import IsaacError  # noqa: E402
 
 # Modules that add sub-commands; a module that is not there (yet) is skipped.
 COMMAND_MODULES = (
@@ -58,10 +86,20 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
+    words = sys.argv[1:] if argv is None else argv
+    command = words[0] if words and not words[0].startswith("-") else None
+    try:
+        return _main(argv, words)
+    except KeyboardInterrupt:
+        # Ctrl-C while the sub-command's modules were imported or its arguments parsed
+        print(f"isaac{' ' + command if command else ''}: interrupted", file=sys.stderr)
+        return 130
+
+
+def _main(argv: list[str] | None, words: list[str]) -> int:
     from isaac.tuning import reuse_large_buffers
 
     reuse_large_buffers()
-    words = sys.argv[1:] if argv is None else argv
     parser = build_parser(words[0] if words else None)
     args = parser.parse_args(argv)
     try:

@@ -108,6 +108,10 @@ def joint_table(joints, n_bodies: int) -> tuple[Joints, np.ndarray]:
     min * n + max of the body pairs that a joint keeps from colliding (collide_connected false),
     which the broad phase drops."""
     m = len(joints)
+    if m == 0:
+        # most scenes: the same empty columns without the 17 passes over no joints (a third of
+        # building a 2-body scene's Simulation, which a sweep does for each of its runs)
+        return _empty_table(), np.zeros(0, dtype=np.int64)
 
     def col(get, dtype=np.float64):
         return np.array([get(j) for j in joints], dtype=dtype).reshape(m)
@@ -152,6 +156,22 @@ def joint_table(joints, n_bodies: int) -> tuple[Joints, np.ndarray]:
     return table, np.array(keys, dtype=np.int64)
 
 
+# the columns of the (m, 2) fields and of the integer and boolean ones; the others are float64
+_PAIRS = ("local_a", "local_b", "axis")
+_TYPES = {"kind": np.int64, "a": np.int64, "b": np.int64, "rigid": bool, "has_limit": bool}
+_TYPES.update(spring=bool, has_motor=bool)
+
+
+def _empty_table() -> Joints:
+    """The table of no joints: what `joint_table` builds for m = 0 (shapes, dtypes, layout)."""
+    return Joints(
+        *(
+            np.zeros((0, 2) if f in _PAIRS else 0, dtype=_TYPES.get(f, np.float64))
+            for f in Joints._fields
+        )
+    )
+
+
 def in_waves(table: Joints, n_bodies: int) -> Joints:
     """The joint table reordered for the position passes, which visit it in this order: each
     joint's wave is one more than the last wave of a joint before it (in the scene's order)
@@ -165,6 +185,8 @@ def in_waves(table: Joints, n_bodies: int) -> Joints:
     the 100 x 100 joint grid's joints fall into 396 waves of 50, and a pass takes 0.61 ms
     instead of 0.74 (a chain's joints stay in its order, one to a wave)."""
     m = table.kind.shape[0]
+    if m == 0:  # no joints: nothing to reorder (and nothing to write in either)
+        return table
     last = np.zeros(n_bodies, dtype=np.int64)
     wave = np.empty(m, dtype=np.int64)
     for k, (a, b) in enumerate(zip(table.a.tolist(), table.b.tolist())):

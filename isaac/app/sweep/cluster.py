@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import os
 import signal
+import threading
 
 
 class _IgnoreInterrupt:
@@ -46,22 +48,73 @@ def start_cluster(scheduler, workers):
     if address:
         return Client(address), None
     n = workers or len(os.sched_getaffinity(0))  # one worker process per core we may use
-    # the workers take the config of their nanny, made here (dask.config.set is undone at exit)
-    with dask.config.set(QUIET):
-        cluster = LocalCluster(
-            n_workers=n,
-            threads_per_worker=1,
-            processes=True,
-            host="127.0.0.1",  # scheduler and workers listen on this machine only
-            dashboard_address=None,
-            # no dashboard; the scheduler's HTTP routes (health, metrics) on a free port of
-            # 127.0.0.1 (its default, 8787, is taken by a second sweep or another cluster)
-            scheduler_kwargs={"dashboard": False, "dashboard_address": "127.0.0.1:0"},
-            silence_logs=logging.ERROR,
-        )
-    client = Client(cluster)
-    from distributed.diagnostics.plugin import WorkerPlugin
+    with _interrupt_held() as interrupted:
+        client = cluster = None
+        try:
+            # the workers take the config of their nanny, made here (dask.config.set is undone
+            # at exit)
+            with dask.config.set(QUIET):
+                cluster = LocalCluster(
+                    n_workers=n,
+                    threads_per_worker=1,
+                    processes=True,
+                    host="127.0.0.1",  # scheduler and workers listen on this machine only
+                    dashboard_address=None,
+                    # no dashboard; the scheduler's HTTP routes (health, metrics) on a free port
+                    # of 127.0.0.1 (its default, 8787, is taken by a second sweep or another)
+                    scheduler_kwargs={"dashboard": False, "dashboard_address": "127.0.0.1:0"},
+                    silence_logs=logging.ERROR,
+                )
+            client = Client(cluster)
+            from distributed.diagnostics.plugin import WorkerPlugin
 
-    plugin = type("IgnoreInterrupt", (_IgnoreInterrupt, WorkerPlugin), {})()
-    client.register_plugin(plugin)
+            plugin = type("IgnoreInterrupt", (_IgnoreInterrupt, WorkerPlugin), {})()
+            client.register_plugin(plugin)
+        except BaseException:
+            _close(client, cluster)
+            raise
+    if interrupted:  # Ctrl-C came while it started: stopped again, then said
+        _close(client, cluster)
+        raise KeyboardInterrupt
     return client, cluster
+
+
+def _close(client, cluster) -> None:
+    for part in (client, cluster):
+        if part is not None:
+            try:
+                part.close()
+            except Exception:  # noqa: BLE001 - stopping after an error or Ctrl-C: best effort
+                pass
+
+
+@contextlib.contextmanager
+def _interrupt_held():
+    """Ctrl-C (SIGINT) held while the local cluster starts, and noted: yields a list that holds
+    an item once one came. Raised at any moment of the start, it left Dask's start-up half done
+    (tracebacks from the scheduler's and the nannies' coroutines, a cluster nobody stops), and
+    the worker processes, which get the terminal's Ctrl-C too, died with tracebacks of their own
+    before the plugin told them to leave it to this process. So SIGINT is blocked in this thread
+    while the cluster starts: the processes and threads started meanwhile inherit the mask
+    (the workers never see it; they ignore it afterwards anyway), and a thread that was
+    running before can only set the flag. Outside the main thread (no signal handlers there),
+    nothing is done."""
+    caught: list = []
+    if threading.current_thread() is not threading.main_thread():
+        yield caught
+        return
+    # the resource tracker's start blocks and then unblocks SIGINT itself: started first, so
+    # that it does not unblock it in the middle of the cluster's start
+    from multiprocessing import resource_tracker
+
+    resource_tracker.ensure_running()
+    previous = signal.signal(signal.SIGINT, lambda signum, frame: caught.append(signum))
+    mask = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+    try:
+        yield caught
+    finally:
+        try:
+            # a Ctrl-C held meanwhile is delivered here, to the handler above
+            signal.pthread_sigmask(signal.SIG_SETMASK, mask)
+        finally:
+            signal.signal(signal.SIGINT, previous)

@@ -20,8 +20,9 @@ Outline of `execute`:
 
 Steps 3 to 5 are one graph, sent at once: the workers go from the check to the runs without a
 round trip to this process, which on a small machine has no core of its own (docs/sweep-format.md,
-"Speed"). The chunks shrink towards the end of the runs (`_guided_chunks`), so that no worker
-waits long for the last chunk of another at the end of the check or of the fan-out.
+"Speed"). The chunks come in rounds of one equal chunk per worker that shrink towards the end of
+the runs (`_round_chunks`), so that no worker waits long for the last chunk of another at the
+end of the check or of the fan-out.
 
 Ctrl-C (or SIGTERM) cancels the tasks, shuts the cluster down and writes the rows finished so
 far; running the same command again resumes.
@@ -49,9 +50,10 @@ from isaac.errors import IsaacError
 # process, which holds the scheduler, and 5 in the workers), a small run about 1.5 ms; a
 # rescheduled chunk redoes only its unfinished runs (their rows are on disk), so chunks may be big
 MAX_CHUNK = 250
-# chunk sizes shrink as the runs left do (guided self-scheduling): each chunk is the runs left
-# over TASKS_PER_WORKER x workers, so the last chunks, which decide how long the slowest worker
-# runs on alone at the end of the check and of the fan-out, are small
+# chunk sizes shrink as the runs left do (guided self-scheduling, in rounds of one chunk per
+# worker): each round's chunks are the runs left over TASKS_PER_WORKER x workers, so the last
+# ones, which decide how long the slowest worker runs on alone at the end of the check and of
+# the fan-out, are small, and the last round splits what is left evenly (no lone tail chunk)
 TASKS_PER_WORKER = 2
 # ... but no smaller than this many body-steps (the base scene's bodies x steps a run): 20 runs
 # of a 2-body scene at 200 steps (about 30 ms), one run of a 100-body pile
@@ -156,16 +158,31 @@ def _chunks(indices: list[int], size: int) -> list[list[int]]:
     return [indices[start : start + size] for start in range(0, len(indices), size)]
 
 
-def _guided_chunks(indices: list[int], n_workers: int, min_size: int) -> list[list[int]]:
-    """`indices` in chunks of (runs left) / (TASKS_PER_WORKER x n_workers) runs, at most
-    MAX_CHUNK and at least `min_size` (guided self-scheduling: big chunks first, small ones at
-    the end, where a worker that is done waits for the others)."""
-    out, start = [], 0
-    while start < len(indices):
-        left = len(indices) - start
-        size = max(min_size, min(MAX_CHUNK, math.ceil(left / (TASKS_PER_WORKER * n_workers))))
-        out.append(indices[start : start + size])
-        start += size
+def _round_chunks(indices: list[int], n_workers: int, min_size: int) -> list[list[int]]:
+    """`indices`, in order, in rounds of `n_workers` equal chunks of (runs left) /
+    (TASKS_PER_WORKER x n_workers) runs each, at most MAX_CHUNK (guided self-scheduling: big
+    chunks first, small ones at the end, where a worker that is done waits for the others).
+    Once a round's chunks would be `min_size` runs or fewer, the last round splits the runs
+    left evenly over the workers (sizes within one run of each other; fewer chunks only when
+    fewer runs are left than workers): each worker's last chunk ends at about the same time,
+    where chunks of `min_size` and a remainder would leave one worker running alone.
+
+    Which run is in which chunk changes no result (a run depends on the sweep file and its
+    index alone); the plan is a function of the runs, the workers and `min_size` alone."""
+    out, start, n = [], 0, len(indices)
+    while start < n:
+        left = n - start
+        size = min(MAX_CHUNK, math.ceil(left / (TASKS_PER_WORKER * n_workers)))
+        if size <= min_size:  # the last round: what is left, evenly
+            k = min(n_workers, left)
+            for j in range(k):
+                size = left // k + (j < left % k)
+                out.append(indices[start : start + size])
+                start += size
+            break
+        for _ in range(n_workers):
+            out.append(indices[start : start + size])
+            start += size
     return out
 
 
@@ -324,6 +341,15 @@ def _check_on_cluster(client, sweep_f, sweep, todo_chunks, kept, checked) -> tup
     return loads, client.map(work.chunk_summary, loads + checks, pure=False)
 
 
+def _take_rows(client, futures: list, done: dict) -> None:
+    """The rows of the run tasks `futures` that finished, into `done` {index: row}; one gather
+    (a message per worker holding some)."""
+    ok = [f for f in futures if f.status == "finished"]
+    for rows in client.gather(ok, errors="skip"):
+        for row in rows:
+            done[row["index"]] = row
+
+
 def _fan_out(sweep, todo, out, done, pre, client, scheduler, workers, chunk, progress, phases):
     """Steps 3 to 5; fills `done` {index: row} and `phases` (seconds). Returns (interrupted,
     workers used)."""
@@ -343,7 +369,7 @@ def _fan_out(sweep, todo, out, done, pre, client, scheduler, workers, chunk, pro
         if chunk:
             chunks = _chunks(todo, chunk)
         else:
-            chunks = _guided_chunks(todo, n_workers, _min_chunk(sweep))
+            chunks = _round_chunks(todo, n_workers, _min_chunk(sweep))
         sweep_f = client.scatter(sweep, broadcast=True, hash=False)
         phases["cluster"] = (t1 := time.perf_counter()) - t0
         # the whole graph at once: the checks, then one task that says whether every run's
@@ -393,15 +419,20 @@ def _fan_out(sweep, todo, out, done, pre, client, scheduler, workers, chunk, pro
         # the rows stay on the workers until every chunk is done and then come in one gather
         # (a message per worker): fetching each chunk's rows as it finished cost this process
         # and the workers about 2.5 ms of CPU a chunk, taken from the runs on a 2-core machine
-        finished = []
+        # ... except that once no more than the last round is running (a chunk a worker at
+        # most), the rows of the chunks finished so far are fetched while it runs: the gather
+        # at the end then waits for the last chunks' rows alone
+        finished, fetched = [], 0
+        left = len(futures) - 1
         for future in as_completed(futures[:-1]):
             finished.append(future)
+            left -= 1
             if bar is not None:
                 bar.update(len(tasks[by_future[future.key]]["runs"]))
-        ok = [f for f in finished if f.status == "finished"]
-        for rows in client.gather(ok, errors="skip"):
-            for row in rows:
-                done[row["index"]] = row
+            if 0 < left <= n_workers and fetched == 0:
+                fetched = len(finished)
+                _take_rows(client, finished, done)
+        _take_rows(client, finished[fetched:], done)
         for future in finished:
             task = tasks[by_future[future.key]]
             if all(i in done for i in task["runs"]):

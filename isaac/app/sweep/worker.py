@@ -6,11 +6,17 @@ A run's files, in the sweep's output folder:
 - ``logs/.tmp/run-000123.mcap`` (and ``.rrd``): where the recorder writes (as ``.partial``,
   renamed there on close). A run killed or interrupted leaves its file here, never under the
   final name.
-- ``logs/run-000123.mcap``: moved there (one rename) once the recorder has closed the file.
+- ``logs/run-000123.mcap``: moved there (one rename) once the log is on disk. The recorder
+  closes a run's log without an fsync; at the end of its chunk, one sync of the file system
+  (`publish_logs`: ``syncfs``) makes all the chunk's logs durable, and only then are they moved
+  to their final names. An fsync per file cost about a fifth of a small recorded run (1-4 ms
+  of waiting on the disk a log); one sync per chunk costs a few ms for up to 250 logs. So a
+  final name never holds a half-written log, even after a power loss.
 - ``rows/chunk-000120.jsonl``: the rows of the chunk whose first run is 120, one JSON line per
-  run, each appended (and flushed) after the run's logs are in place. A chunk that Dask runs
-  again after its worker died finds the rows of the runs already done and keeps them: a killed
-  worker costs only the run it was in. A line cut short by a kill is not a row.
+  run, each appended (and flushed) once the run's logs are closed (and their sha256 taken). A
+  chunk that Dask runs again after its worker died finds the rows of the runs already done and
+  keeps them (`row_is_complete` moves their logs, still in ``logs/.tmp``, into place): a
+  killed worker costs only the run it was in. A line cut short by a kill is not a row.
 
 Where a run's time goes is what shapes this module (docs/sweep-format.md, "Speed"): a small run
 simulates in well under a millisecond, so everything per run besides the simulation is kept
@@ -60,8 +66,15 @@ def sha256_of(path: str) -> str:
     return h.hexdigest()
 
 
+def tmp_path(out_dir: str, rel: str) -> str:
+    """Where the log whose final name is OUT/`rel` is written (logs/.tmp/NAME)."""
+    return os.path.join(out_dir, TMP_DIR, os.path.basename(rel))
+
+
 def row_is_complete(out_dir: str, row: dict) -> bool:
-    """Whether `row`'s logs are there and are the files the row describes (sha256)."""
+    """Whether `row`'s logs are there and are the files the row describes (sha256). A log that
+    is not under its final name yet but finished in logs/.tmp with that sha256 (its chunk was
+    stopped before `publish_logs`: a killed worker, Ctrl-C) is synced and moved there first."""
     for kind in ("mcap", "rrd"):
         rel = row.get("log_path" if kind == "mcap" else "rrd_path")
         if rel is None:
@@ -69,11 +82,60 @@ def row_is_complete(out_dir: str, row: dict) -> bool:
         path = os.path.join(out_dir, rel)
         want = row.get("log_sha256" if kind == "mcap" else "rrd_sha256")
         try:
-            if sha256_of(path) != want:
+            if sha256_of(path) == want:
+                continue
+        except OSError:
+            pass
+        tmp = tmp_path(out_dir, rel)
+        try:
+            if sha256_of(tmp) != want:
                 return False
+            publish_logs(out_dir, [(tmp, path)], each=True)
         except OSError:
             return False
     return True
+
+
+def _syncfs(path: str) -> bool:
+    """syncfs(2) of the file system holding `path` (Linux): every file written there reaches
+    the disk, in one call; False where the C library has none."""
+    import ctypes
+
+    try:
+        syncfs = ctypes.CDLL(None, use_errno=True).syncfs
+    except (OSError, AttributeError):
+        return False
+    fd = os.open(path, os.O_RDONLY)
+    try:
+        if syncfs(fd) != 0:
+            err = ctypes.get_errno()
+            raise OSError(err, os.strerror(err), path)
+    finally:
+        os.close(fd)
+    return True
+
+
+def _fsync_path(path: str) -> None:
+    fd = os.open(path, os.O_RDONLY)
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)
+
+
+def publish_logs(out_dir: str, moves: list[tuple[str, str]], each: bool = False) -> None:
+    """Make the finished logs `moves` ([(path in logs/.tmp, final path)]) durable, then give
+    them their final names: one sync of OUT's file system for them all (or an fsync per file:
+    `each`, or no syncfs here), a rename each, and an fsync of logs/ so that the renames last
+    too. OSError if any step fails (the files not yet moved stay in logs/.tmp)."""
+    if not moves:
+        return
+    if each or not _syncfs(out_dir):
+        for tmp, _ in moves:
+            _fsync_path(tmp)
+    for tmp, final in moves:
+        os.replace(tmp, final)
+    _fsync_path(os.path.join(out_dir, LOGS_DIR))
 
 
 def read_rows(path: str) -> list[dict]:
@@ -171,8 +233,9 @@ class _RowFile:
 class Clock:
     """Wall seconds of each part of the runs timed with it, summed (bench/sweep.py reports them
     per run): scene (loading a run's scene, when the run does it itself), build (the
-    Simulation and the metrics' start), simulate (the compiled batches), record (the recorder:
-    open, write, close, rename, sha256), metrics, row (the row's line appended)."""
+    Simulation: the engine's model and state), simulate (the compiled batches), record (the
+    recorder: open, write, close, sha256; and the chunk's one sync and renames at its end),
+    metrics (their start, each batch's share and the values), row (the row's line appended)."""
 
     PARTS = ("scene", "build", "simulate", "record", "metrics", "row")
 
@@ -191,9 +254,16 @@ class Clock:
         self.seconds[part] += t - self._t
         self._t = t
 
+    def mark(self) -> None:
+        """Start timing work that is no run's (a chunk's), without counting a run."""
+        self._t = time.perf_counter()
+
 
 class _NoClock:
     def start(self) -> None:
+        pass
+
+    def mark(self) -> None:
         pass
 
     def lap(self, part: str) -> None:
@@ -291,28 +361,41 @@ def run_chunk(
             scenes = dict(zip(loaded["indices"], loaded["scenes"]))
     worker = _worker_name()
     rows = []
+    moves: list[tuple[str, str]] = []  # the chunk's finished logs, moved into place at its end
     file = _RowFile(path)
     try:
         for index in task["runs"]:
             row = done.get(index)
             if row is None:
                 row = run_one(
-                    task, sweep, index, scenes.get(index), params.get(index), worker, clock
+                    task,
+                    sweep,
+                    index,
+                    scenes.get(index),
+                    params.get(index),
+                    worker,
+                    clock,
+                    moves=moves,
                 )
                 file.append(row)
                 clock.lap("row")
             rows.append(row)
     finally:
         file.close()
+    clock.mark()
+    publish_logs(out_dir, moves)
+    clock.lap("record")
     return rows
 
 
 def run_one(
-    task: dict, sweep, index: int, scene=None, params=None, worker=None, clock=None
+    task: dict, sweep, index: int, scene=None, params=None, worker=None, clock=None, moves=None
 ) -> dict:
     """Simulate, measure and (maybe) record run `index`; its row (status "ok" or "failed").
     `scene`, `params`: the run's loaded scene and table values, when already known; `clock`:
-    a `Clock` to time the run's parts with."""
+    a `Clock` to time the run's parts with. `moves`: a list to which the run's finished logs
+    are added as (path in logs/.tmp, final path), closed without an fsync, for the caller to
+    sync and move (`publish_logs`); else each is synced and moved here."""
     from isaac.app.sweep.metrics import Measure
     from isaac.engine.simulation import Simulation
     from isaac.errors import IsaacError
@@ -323,7 +406,7 @@ def run_one(
     started = time.perf_counter()
     out_dir = task["out"]
     names = log_names(index, task["record"])
-    tmp = {k: os.path.join(out_dir, TMP_DIR, os.path.basename(v)) for k, v in names.items()}
+    tmp = {k: tmp_path(out_dir, v) for k, v in names.items()}
     steps = task["steps"]
     error = None
     recorder = None
@@ -337,8 +420,9 @@ def run_one(
             )
         clock.lap("scene")
         sim = Simulation(scene)
-        measure = Measure(sim, task["metrics"], task["final_bodies"])
         clock.lap("build")
+        measure = Measure(sim, task["metrics"], task["final_bodies"])
+        clock.lap("metrics")
         if tmp:
             from recorder import Recorder
 
@@ -372,15 +456,17 @@ def run_one(
             except Exception:  # noqa: BLE001 - the process is going away
                 pass
         raise
-    paths: dict[str, str] = {}
+    paths: dict[str, str] = {}  # kind: final path (relative), of the logs finished
     if recorder is not None:
         try:
+            sync = moves is None
             if error is None:
-                recorder.close(complete=True)
+                recorder.close(complete=True, sync=sync)
             else:
-                recorder.close(complete=False, reason=error)
+                recorder.close(complete=False, reason=error, sync=sync)
             for kind, rel in names.items():
-                os.replace(tmp[kind], os.path.join(out_dir, rel))
+                if sync:
+                    os.replace(tmp[kind], os.path.join(out_dir, rel))
                 paths[kind] = rel
         except (OSError, IsaacError) as exc:
             error = error or " ".join(f"could not finish the log: {exc}".split())
@@ -391,16 +477,16 @@ def run_one(
     clock.lap("metrics")
     row["status"] = "ok" if error is None else "failed"
     row["error"] = error
+    # the bytes are the same in logs/.tmp and under the final name
+    where = tmp if moves is not None else {k: os.path.join(out_dir, v) for k, v in paths.items()}
     if task["record"] != "none":
         row["log_path"] = paths.get("mcap")
-        row["log_sha256"] = (
-            sha256_of(os.path.join(out_dir, paths["mcap"])) if "mcap" in paths else None
-        )
+        row["log_sha256"] = sha256_of(where["mcap"]) if "mcap" in paths else None
     if task["record"] == "mcap+rrd":
         row["rrd_path"] = paths.get("rrd")
-        row["rrd_sha256"] = (
-            sha256_of(os.path.join(out_dir, paths["rrd"])) if "rrd" in paths else None
-        )
+        row["rrd_sha256"] = sha256_of(where["rrd"]) if "rrd" in paths else None
+    if moves is not None:
+        moves.extend((tmp[k], os.path.join(out_dir, v)) for k, v in paths.items())
     clock.lap("record")
     row["wall_time_s"] = time.perf_counter() - started
     row["worker"] = worker or _worker_name()
@@ -439,6 +525,6 @@ def warm_up(scene_texts: list[str], scene_path: str, scene_name: str, record: st
             finally:
                 if recorder is not None:
                     try:
-                        recorder.close(complete=False, reason="warm-up")
+                        recorder.close(complete=False, reason="warm-up", sync=False)
                     except IsaacError:
                         pass
