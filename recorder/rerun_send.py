@@ -410,11 +410,11 @@ def _read_exactly(fd: int, n: int) -> bytes | None:
     return b"".join(parts)
 
 
-def child_main(cmd_fd: int, rep_fd: int, preopen: dict | None = None) -> int:
-    """The child: read commands, send them to the file; see the module docstring. preopen:
-    `RerunSender`'s arguments, known before the run's model is (`recorder.spawn`): the stream,
-    its layout and static entities are made at once, while the parent is still starting, and
-    the ``open`` command that agrees with them only adds the scales."""
+def child_main(cmd_fd: int, rep_fd: int) -> int:
+    """The child: read commands, send them to the file; see the module docstring. A
+    ``prepare`` command (`recorder.spawn.WriterChild.prepare`, sent as soon as the parent has
+    read the scene) makes the stream, its layout and static entities while the parent is still
+    building the model; the ``open`` command that agrees with them only adds the scales."""
     import pickle
     import signal
 
@@ -434,8 +434,6 @@ def child_main(cmd_fd: int, rep_fd: int, preopen: dict | None = None) -> int:
 
     sender = None
     try:
-        if preopen is not None:
-            sender = RerunSender(**preopen)
         reply(b"K")
         while True:
             head = _read_exactly(cmd_fd, _LENGTH)
@@ -445,7 +443,10 @@ def child_main(cmd_fd: int, rep_fd: int, preopen: dict | None = None) -> int:
                     sender.abandon(ABANDONED)
                 return 0
             method, args = pickle.loads(body)
-            if method == "open":
+            if method == "prepare":  # sent by `recorder.spawn.WriterChild.prepare`
+                if sender is None:
+                    sender = RerunSender(**args[0])
+            elif method == "open":
                 (partial_path, recording_id), header = args
                 scales = [header.pop(k) for k in ("impulse_scale", "normal_length", "push_scale")]
                 key = (partial_path, recording_id, bool(header["joints"]), int(header["moving"]))
@@ -480,11 +481,9 @@ def child_main(cmd_fd: int, rep_fd: int, preopen: dict | None = None) -> int:
 
 
 if __name__ == "__main__":
-    import json
     import sys
 
-    preopen = json.loads(sys.argv[3]) if len(sys.argv) > 3 else None
-    code = child_main(int(sys.argv[1]), int(sys.argv[2]), preopen)
+    code = child_main(int(sys.argv[1]), int(sys.argv[2]))
     # the file is closed (or abandoned and flushed): skip the interpreter's teardown
     sys.stderr.flush()
     os._exit(code)

@@ -20,7 +20,6 @@ and ``thread``.
 
 from __future__ import annotations
 
-import json
 import os
 import subprocess
 import sys
@@ -69,6 +68,21 @@ class WriterChild:
             self.proc.kill()
             self.proc.wait()
         self.stderr.close()
+
+    def prepare(self, partial_path: str, recording_id: str, joints: bool, moving: int) -> None:
+        """Tell the Rerun sender (kind SENDER) what the scene alone says of the recording
+        (`recorder.rerun_send.RerunSender`'s arguments): it makes the stream, its layout and
+        static entities as soon as rerun-sdk is imported, while this process still builds the
+        model (0.1 s it no longer waits for), and the ``open`` that agrees only adds the
+        scales. The command waits in the pipe (`SENDER_PIPE_BYTES`) if the child is still
+        importing; the framing is `recorder.rerun_send`'s (length, then a pickle)."""
+        import pickle
+
+        args = dict(partial_path=partial_path, recording_id=recording_id, joints=joints)
+        body = pickle.dumps(("prepare", (dict(args, moving=moving),)), pickle.HIGHEST_PROTOCOL)
+        view = memoryview(len(body).to_bytes(8, "little") + body)
+        while view:
+            view = view[os.write(self.cmd_fd, view) :]
 
 
 def _shared_memory() -> int:
@@ -124,13 +138,12 @@ def start_writer_child(kind: str, keep_fd: int | None = None) -> WriterChild:
     return WriterChild(kind, proc, cmd_w, rep_r, ring_fd, stderr)
 
 
-def start_sender_child(keep_fd: int | None = None, preopen: dict | None = None) -> WriterChild:
+def start_sender_child(keep_fd: int | None = None) -> WriterChild:
     """Start the Rerun sender process (`recorder.rerun_send`, run as ``python -m``): it imports
-    rerun-sdk at once, then waits for the recording's ``open`` on its command pipe. keep_fd:
-    as for `start_writer_child` (the ``.rrd`` output's lock, held until it exits). preopen:
-    what the scene alone tells of the recording (`recorder.rerun_send.RerunSender`'s
-    partial_path, recording_id, joints, moving): the child then makes the stream, its layout
-    and static entities before the parent has built its model (0.1 s it no longer waits for)."""
+    rerun-sdk at once, then reads its command pipe. keep_fd: as for `start_writer_child` (the
+    ``.rrd`` output's lock, held until it exits). It needs nothing of the scene to start, so
+    `isaac run` starts it before it reads the scene; `WriterChild.prepare` then tells it what
+    the scene alone says of the recording."""
     cmd_r, cmd_w = os.pipe()
     rep_r, rep_w = os.pipe()
     try:
@@ -145,8 +158,7 @@ def start_sender_child(keep_fd: int | None = None, preopen: dict | None = None) 
     env["PYTHONPATH"] = os.pathsep.join(p for p in (root, env.get("PYTHONPATH")) if p)
     try:
         proc = subprocess.Popen(
-            [sys.executable, "-m", "recorder.rerun_send", str(cmd_r), str(rep_w)]
-            + ([] if preopen is None else [json.dumps(preopen)]),
+            [sys.executable, "-m", "recorder.rerun_send", str(cmd_r), str(rep_w)],
             pass_fds=(cmd_r, rep_w) + (() if keep_fd is None else (keep_fd,)),
             stdin=subprocess.DEVNULL,
             stdout=subprocess.DEVNULL,
