@@ -720,7 +720,8 @@ class RerunSendProcess:
     def open(self, partial_path: str, recording_id: str, **header):
         """Start the recording (`recorder.rerun_send.open_sender`'s arguments); returns self.
         The file is not touched here: the output's claim (`recorder.outputs`) made sure it can
-        be written, and a child started with ``preopen`` is writing it already."""
+        be written, and a child told the scene beforehand (`recorder.spawn.WriterChild.prepare`)
+        is writing it already."""
         self.partial_path = partial_path
         self._call("open", ((partial_path, recording_id), header))
         return self
