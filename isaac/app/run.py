@@ -100,21 +100,24 @@ class _StopRequest:
             self.signal = signum
 
 
-def _claim_outputs(args: argparse.Namespace) -> dict:
-    """Check and claim the output files before anything is computed: {"mcap": OutputClaim,
-    "rrd": OutputClaim} for those given. Raises LogError (one line, exit 2) for an output that
-    is the scene or the other output, whose directory cannot be made, that is not a file, that
-    another run is writing, or whose .partial holds an earlier run's steps (without --force)."""
+def _claim_outputs(args: argparse.Namespace) -> tuple[dict, list]:
+    """Check and claim the output files before anything is computed: ({"mcap": OutputClaim,
+    "rrd": OutputClaim} for those given, the directories made for them, for `_unmake`).
+    Raises LogError (one line, exit 2) for an output that is the scene or the other output,
+    whose directory cannot be made, that is not a file, that another run is writing, or whose
+    .partial holds an earlier run's steps (without --force); the directories it made are then
+    removed again."""
     outputs = {label: out for label, out in (("--mcap", args.mcap), ("--rrd", args.rrd)) if out}
     if not outputs:
-        return {}
+        return {}, []
     from recorder.outputs import check_distinct, claim
 
     check_distinct(outputs, {"scene file": args.scene})
-    for out in outputs.values():
-        _make_parent(out)
+    made = []
     claims = {}
     try:
+        for out in outputs.values():
+            made += _make_parent(out)
         for kind, label in (("mcap", "--mcap"), ("rrd", "--rrd")):
             if label in outputs:
                 claims[kind] = claim(
@@ -126,15 +129,19 @@ def _claim_outputs(args: argparse.Namespace) -> dict:
     except BaseException:
         for c in claims.values():
             c.release(discard=True)
+        _unmake(made)
         raise
-    return claims
+    return claims, made
 
 
-def _make_parent(out: str) -> None:
-    """Create the directory of output ``out`` (and its parents); LogError in one line if not."""
+def _make_parent(out: str) -> list[str]:
+    """Create the directory of output ``out`` (and its parents); LogError in one line if not.
+    Returns the directories it created, deepest first."""
     parent = os.path.dirname(os.path.abspath(out))
     existing = parent
+    missing = []
     while not os.path.lexists(existing):
+        missing.append(existing)
         existing = os.path.dirname(existing)
     if not os.path.isdir(existing):
         raise LogError(f"cannot write {out}: {existing} is not a directory")
@@ -142,6 +149,17 @@ def _make_parent(out: str) -> None:
         os.makedirs(parent, exist_ok=True)
     except OSError as exc:
         raise LogError(f"cannot write {out}: cannot create {parent}: {exc.strerror}") from exc
+    return missing
+
+
+def _unmake(made: list[str]) -> None:
+    """Remove the directories `_make_parent` created, where still empty: a run
+    that stopped before its files were opened leaves nothing behind."""
+    for directory in sorted(made, key=len, reverse=True):  # a child before its parent
+        try:
+            os.rmdir(directory)
+        except OSError:  # not empty (something else wrote there), or already gone
+            pass
 
 
 def _plan_recording(args: argparse.Namespace, claims: dict, scene, steps: int) -> str:
@@ -242,7 +260,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     # the outputs are claimed and the Rerun sender started before the scene is read (which
     # imports numpy and numba): the sender's import of rerun-sdk, the longest part of a short
     # recorded run, starts 0.15-0.2 s sooner
-    claims = _claim_outputs(args)
+    claims, made = _claim_outputs(args)
     children = {}
     try:
         children = _start_sender(args.offload, claims)
@@ -269,6 +287,7 @@ def cmd_run(args: argparse.Namespace) -> int:
             child.discard()
         for c in claims.values():
             c.release(discard=True)
+        _unmake(made)
         raise
     recorder = None
     first = last = sim.record()
