@@ -92,6 +92,15 @@ def _vec2(points: np.ndarray) -> pa.Array:
     return pa.FixedSizeListArray.from_arrays(pa.array(points.reshape(-1)), type=_VEC2_TYPE)
 
 
+def _arrows(vectors: pa.Array, origins: pa.Array, counts: np.ndarray) -> list:
+    """An Arrows2D entity's columns, in the order ``Arrows2D.columns`` gives: vectors, then
+    origins (both Vec2D arrow arrays, ``counts[k]`` arrows at step k)."""
+    return [
+        _column(rr.Arrows2D.descriptor_vectors(), rr.components.Vector2DBatch, vectors, counts),
+        _column(rr.Arrows2D.descriptor_origins(), rr.components.Position2DBatch, origins, counts),
+    ]
+
+
 class RerunSender:
     """One recording stream writing ``partial_path``: the layout and static entities at once
     (what the scene alone decides), then the drawing scales (`scales`, which need the model)
@@ -269,43 +278,10 @@ class RerunSender:
                 )
             ],
         )
-        # the order Arrows2D.columns gives: vectors, then origins
         for entity, vectors in (("world/normals", normals), ("world/impulses", impulses)):
-            rec.send_columns(
-                entity,
-                indexes=times,
-                columns=[
-                    _column(
-                        rr.Arrows2D.descriptor_vectors(),
-                        rr.components.Vector2DBatch,
-                        _vec2(vectors),
-                        counts,
-                    ),
-                    _column(
-                        rr.Arrows2D.descriptor_origins(),
-                        rr.components.Position2DBatch,
-                        points,
-                        counts,
-                    ),
-                ],
-            )
+            rec.send_columns(entity, indexes=times, columns=_arrows(_vec2(vectors), points, counts))
         rec.send_columns(
-            "world/push",
-            indexes=times,
-            columns=[
-                _column(
-                    rr.Arrows2D.descriptor_vectors(),
-                    rr.components.Vector2DBatch,
-                    _vec2(push_v),
-                    push_counts,
-                ),
-                _column(
-                    rr.Arrows2D.descriptor_origins(),
-                    rr.components.Position2DBatch,
-                    _vec2(push_pt),
-                    push_counts,
-                ),
-            ],
+            "world/push", indexes=times, columns=_arrows(_vec2(push_v), _vec2(push_pt), push_counts)
         )
         if self.joints:
             # each joint a 2-point strip from a's anchor to b's; the anchors as points

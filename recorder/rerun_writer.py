@@ -540,31 +540,10 @@ class RerunLogWriter:
         else:
             self._queue.put(job)
 
-    def _send_batch(
-        self,
-        steps,
-        sim_times,
-        strips,
-        lengths,
-        strip_counts,
-        points,
-        normals,
-        impulses,
-        counts,
-        push_pt,
-        push_v,
-        push_counts,
-        joints,
-        joint_counts,
-        stats,
-        stats_rows,
-    ) -> None:
-        """Send one batch (the arrays `_send` took): outlines, contacts, arrows, joints, stats
-        (`recorder.rerun_send.RerunSender.batch`)."""
-        self._sender.batch(
-            steps, sim_times, strips, lengths, strip_counts, points, normals, impulses, counts,
-            push_pt, push_v, push_counts, joints, joint_counts, stats, stats_rows,
-        )  # fmt: skip
+    def _send_batch(self, *job) -> None:
+        """Send one batch (the arrays `_send` took, in its order): outlines, contacts, arrows,
+        joints, stats (`recorder.rerun_send.RerunSender.batch`)."""
+        self._sender.batch(*job)
 
     def _work(self) -> None:
         """The sender thread: batches in order; after a failure, it only drains the queue

@@ -62,11 +62,7 @@ class WriterChild:
                 os.close(fd)
             except OSError:
                 pass
-        try:
-            self.proc.wait(timeout=10)
-        except subprocess.TimeoutExpired:  # pragma: no cover - a stuck child
-            self.proc.kill()
-            self.proc.wait()
+        reap(self.proc, 10)
         self.stderr.close()
 
     def prepare(self, partial_path: str, recording_id: str, joints: bool, moving: int) -> None:
@@ -95,6 +91,48 @@ def _shared_memory() -> int:
     return fd  # pragma: no cover
 
 
+def _start_python(
+    module: str, args: list, pass_fds: tuple[int, ...], child_ends: tuple[int, ...], parent_ends
+) -> tuple[subprocess.Popen, object]:
+    """``python -m module args...`` with this checkout on its path, ``pass_fds`` passed,
+    standard error to an unlinked temporary file, in a process group of its own (Ctrl-C
+    reaches the run loop, which closes the files). ``child_ends`` (the child's pipe ends) are
+    closed here once it has them; on failure the parent's ends ``parent_ends`` are closed too.
+    Returns (the process, its standard error)."""
+    stderr = tempfile.TemporaryFile()
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    env = dict(os.environ)
+    env["PYTHONPATH"] = os.pathsep.join(p for p in (root, env.get("PYTHONPATH")) if p)
+    try:
+        proc = subprocess.Popen(
+            [sys.executable, "-m", module, *map(str, args)],
+            pass_fds=pass_fds,
+            stdin=subprocess.DEVNULL,
+            stdout=subprocess.DEVNULL,
+            stderr=stderr,
+            env=env,
+            process_group=0,
+        )
+    except BaseException:
+        for fd in parent_ends:
+            os.close(fd)
+        stderr.close()
+        raise
+    finally:
+        for fd in child_ends:
+            os.close(fd)
+    return proc, stderr
+
+
+def reap(proc: subprocess.Popen, timeout: float) -> None:
+    """Wait for a child that was told to stop; kill it after ``timeout`` s (a stuck child)."""
+    try:
+        proc.wait(timeout=timeout)
+    except subprocess.TimeoutExpired:  # pragma: no cover - a stuck child
+        proc.kill()
+        proc.wait()
+
+
 def start_writer_child(kind: str, keep_fd: int | None = None) -> WriterChild:
     """Start the writer process of ``kind`` ("mcap" or "rerun"); it begins importing what it
     writes with at once. keep_fd: a descriptor the child keeps open, unused, until it exits
@@ -104,37 +142,14 @@ def start_writer_child(kind: str, keep_fd: int | None = None) -> WriterChild:
     ring_fd = _shared_memory()
     cmd_r, cmd_w = os.pipe()
     rep_r, rep_w = os.pipe()
-    stderr = tempfile.TemporaryFile()
-    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-    env = dict(os.environ)
-    env["PYTHONPATH"] = os.pathsep.join(p for p in (root, env.get("PYTHONPATH")) if p)
-    try:
-        proc = subprocess.Popen(
-            [
-                sys.executable,
-                "-m",
-                "recorder.writer_process",
-                kind,
-                str(cmd_r),
-                str(rep_w),
-                str(ring_fd),
-            ],
-            pass_fds=(cmd_r, rep_w, ring_fd) + (() if keep_fd is None else (keep_fd,)),
-            stdin=subprocess.DEVNULL,
-            stdout=subprocess.DEVNULL,
-            stderr=stderr,
-            env=env,
-            # its own process group: Ctrl-C reaches the run loop, which closes the files
-            process_group=0,
-        )
-    except BaseException:
-        for fd in (cmd_w, rep_r, ring_fd):
-            os.close(fd)
-        stderr.close()
-        raise
-    finally:
-        os.close(cmd_r)
-        os.close(rep_w)
+    keep = () if keep_fd is None else (keep_fd,)
+    proc, stderr = _start_python(
+        "recorder.writer_process",
+        [kind, cmd_r, rep_w, ring_fd],
+        pass_fds=(cmd_r, rep_w, ring_fd) + keep,
+        child_ends=(cmd_r, rep_w),
+        parent_ends=(cmd_w, rep_r, ring_fd),
+    )
     return WriterChild(kind, proc, cmd_w, rep_r, ring_fd, stderr)
 
 
@@ -152,26 +167,11 @@ def start_sender_child(keep_fd: int | None = None) -> WriterChild:
         fcntl.fcntl(cmd_w, getattr(fcntl, "F_SETPIPE_SZ", 1031), SENDER_PIPE_BYTES)
     except (ImportError, OSError):  # pragma: no cover - not Linux, or over pipe-max-size
         pass
-    stderr = tempfile.TemporaryFile()
-    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-    env = dict(os.environ)
-    env["PYTHONPATH"] = os.pathsep.join(p for p in (root, env.get("PYTHONPATH")) if p)
-    try:
-        proc = subprocess.Popen(
-            [sys.executable, "-m", "recorder.rerun_send", str(cmd_r), str(rep_w)],
-            pass_fds=(cmd_r, rep_w) + (() if keep_fd is None else (keep_fd,)),
-            stdin=subprocess.DEVNULL,
-            stdout=subprocess.DEVNULL,
-            stderr=stderr,
-            env=env,
-            process_group=0,  # as the writer processes: Ctrl-C reaches the run loop only
-        )
-    except BaseException:
-        for fd in (cmd_w, rep_r):
-            os.close(fd)
-        stderr.close()
-        raise
-    finally:
-        os.close(cmd_r)
-        os.close(rep_w)
+    proc, stderr = _start_python(
+        "recorder.rerun_send",
+        [cmd_r, rep_w],
+        pass_fds=(cmd_r, rep_w) + (() if keep_fd is None else (keep_fd,)),
+        child_ends=(cmd_r, rep_w),
+        parent_ends=(cmd_w, rep_r),
+    )
     return WriterChild(SENDER, proc, cmd_w, rep_r, -1, stderr)

@@ -83,7 +83,7 @@ from recorder.frames import (
     read_rerun_frame,
 )
 from recorder.pack import model_bundle
-from recorder.spawn import SENDER, WriterChild, start_writer_child
+from recorder.spawn import SENDER, WriterChild, reap, start_writer_child
 
 # shared memory per writer, in frames of the scene's size, within RING_MIN..RING_MAX bytes,
 # mapped pre-faulted (a fresh page costs a fault in each process: writes over a cold 32 MiB
@@ -641,26 +641,11 @@ class WriterProcess:
         return got
 
     def _child_reason(self) -> str:
-        code = self.proc.poll()
-        if code is None:
-            try:
-                code = self.proc.wait(timeout=5)
-            except subprocess.TimeoutExpired:
-                return ""
-        self._stderr.seek(0)
-        lines = [
-            ln for ln in self._stderr.read().decode("utf-8", "replace").splitlines() if ln.strip()
-        ]
-        last = f": {lines[-1].strip()}" if lines else ""
-        return f" (exit code {code}){last}"
+        return _child_reason(self.proc, self._stderr)
 
     def _shutdown(self) -> None:
         os.close(self._cmd)
-        try:
-            self.proc.wait(timeout=60)
-        except subprocess.TimeoutExpired:  # pragma: no cover - a stuck child
-            self.proc.kill()
-            self.proc.wait()
+        reap(self.proc, 60)
         os.close(self._rep)
         del self._ring_u8
         self._view.release()
@@ -677,6 +662,21 @@ class WriterProcess:
                 self._ring.close()
             except BufferError:
                 pass
+
+
+def _child_reason(proc, stderr) -> str:
+    """`` (exit code N): its last line of standard error`` of a writer child that stopped, for
+    the parent's one-line error; "" if it is still running after 5 s."""
+    code = proc.poll()
+    if code is None:
+        try:
+            code = proc.wait(timeout=5)
+        except subprocess.TimeoutExpired:
+            return ""
+    stderr.seek(0)
+    lines = [ln for ln in stderr.read().decode("utf-8", "replace").splitlines() if ln.strip()]
+    last = f": {lines[-1].strip()}" if lines else ""
+    return f" (exit code {code}){last}"
 
 
 class RerunSendProcess:
@@ -822,18 +822,7 @@ class RerunSendProcess:
         return bool(chunk)
 
     def _child_reason(self) -> str:
-        code = self.proc.poll()
-        if code is None:
-            try:
-                code = self.proc.wait(timeout=5)
-            except subprocess.TimeoutExpired:
-                return ""
-        self._stderr.seek(0)
-        lines = [
-            ln for ln in self._stderr.read().decode("utf-8", "replace").splitlines() if ln.strip()
-        ]
-        last = f": {lines[-1].strip()}" if lines else ""
-        return f" (exit code {code}){last}"
+        return _child_reason(self.proc, self._stderr)
 
     def _shutdown(self) -> None:
         if self._finished:
@@ -842,11 +831,7 @@ class RerunSendProcess:
         self._queue.put(None)
         self._thread.join()
         os.close(self._cmd)  # the child ends at the end of the pipe, if not before
-        try:
-            self.proc.wait(timeout=60)
-        except subprocess.TimeoutExpired:  # pragma: no cover - a stuck child
-            self.proc.kill()
-            self.proc.wait()
+        reap(self.proc, 60)
         os.close(self._rep)
         self._stderr.close()
 
