@@ -101,11 +101,25 @@ def _versions() -> dict[str, str]:
         "python_implementation": platform.python_implementation(),
         "numpy_version": numpy.__version__,
         "numba_version": numba.__version__,
-        "platform": platform.platform(),
+        "platform": platform_name(),
         "machine": platform.machine(),
         "cpu": _cpu_name(),
         "byteorder": sys.byteorder,
     }
+
+
+def platform_name() -> str:
+    """`platform.platform()`'s name of this system (``Linux-6.1.0-x86_64-with-glibc2.36``),
+    on Linux without the ``uname -p`` child process it starts to ask for the processor (a
+    fork and exec in the middle of opening a log), whose answer Linux's name leaves out
+    anyway: "unknown" or the machine again. Elsewhere, `platform.platform()` itself."""
+    import platform
+
+    if not sys.platform.startswith("linux"):
+        return platform.platform()
+    u = os.uname()
+    libc, version = platform.libc_ver()
+    return "-".join(p for p in (u.sysname, u.release, u.machine, "with", libc + version) if p)
 
 
 def _cpu_name() -> str:

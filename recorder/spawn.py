@@ -24,7 +24,6 @@ import os
 import subprocess
 import sys
 import tempfile
-from dataclasses import dataclass
 
 KINDS = ("mcap", "rerun")
 # the Rerun sender (`recorder.rerun_send`): fed drawn batches through a pipe, not a ring
@@ -35,22 +34,32 @@ SENDER = "rerun-send"
 SENDER_PIPE_BYTES = 1 << 20
 
 
-@dataclass
 class WriterChild:
     """A started writer process that has not been given its configuration yet.
 
+    kind: one of KINDS, or SENDER (ring_fd is then -1: it has no ring).
     cmd_fd: the parent's end of the command pipe; reply_fd: the parent's end of the reply pipe.
     ring_fd: the shared memory the frames go through, created empty: the parent sizes it
     (``os.ftruncate``) and maps it once it knows the scene, then tells the child its size in the
     configuration. stderr: the child's standard error (a temporary file, already unlinked).
+
+    (A plain class, not a dataclass: `dataclasses` imports `inspect`, 13-16 ms before the
+    Rerun sender could start, on a short recorded run's critical path.)
     """
 
-    kind: str  # one of KINDS, or SENDER (ring_fd is then -1: it has no ring)
-    proc: subprocess.Popen
-    cmd_fd: int
-    reply_fd: int
-    ring_fd: int
-    stderr: object
+    __slots__ = ("kind", "proc", "cmd_fd", "reply_fd", "ring_fd", "stderr")
+
+    def __init__(
+        self,
+        kind: str,
+        proc: subprocess.Popen,
+        cmd_fd: int,
+        reply_fd: int,
+        ring_fd: int,
+        stderr: object,
+    ) -> None:
+        self.kind, self.proc, self.stderr = kind, proc, stderr
+        self.cmd_fd, self.reply_fd, self.ring_fd = cmd_fd, reply_fd, ring_fd
 
     def discard(self) -> None:
         """Stop a child that will never be configured: closing the command pipe before the

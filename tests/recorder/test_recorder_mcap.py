@@ -157,6 +157,9 @@ def test_metadata_and_scene_attachment_come_before_any_chunk(tmp_path):
         "world.solver",
     ):
         assert key in isaac, key
+    import platform
+
+    assert isaac["platform"] == platform.platform()  # the same name, without `uname -p`
     assert attachments["scene.yaml"].data.decode() == SCENE_TEXT
     import hashlib
 
