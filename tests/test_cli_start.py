@@ -78,3 +78,40 @@ def test_a_program_that_imports_the_command_line_keeps_its_own_ctrl_c():
     proc = _python("import sys; import isaac.app.cli; print(sys.excepthook is sys.__excepthook__)")
     assert proc.returncode == 0, proc.stderr
     assert proc.stdout.strip() == "True"
+
+
+def _as_the_command(args: str, before: str = "") -> subprocess.CompletedProcess:
+    """`isaac ARGS` as its console script runs it (argv[0] `isaac`, `main()` on sys.argv),
+    after `before` (Python lines)."""
+    return _python(
+        "import atexit, sys, threading, time\n"
+        f"{before}\n"
+        f"sys.argv = ['/usr/bin/isaac', *{args.split()!r}]\n"
+        "from isaac.app.cli import main\n"
+        "sys.exit(main())\n"
+    )
+
+
+def test_the_command_ends_at_once_with_its_status_output_and_exit_handlers():
+    # isaac ends with os._exit (no interpreter teardown): its status, both streams' last
+    # lines and the atexit handlers must survive it, and nothing after main() runs
+    before = "atexit.register(lambda: print('handler ran', flush=True))"
+    ok = _as_the_command("check scenes/bounce.yaml", before + "\nsys.exit = None")
+    assert ok.returncode == 0, ok.stderr
+    assert ok.stdout.rstrip().endswith("handler ran")
+    assert "bounce" in ok.stdout
+    bad = _as_the_command("check scenes/missing.yaml", before)
+    assert bad.returncode == 2
+    assert bad.stderr.count("\n") == 1 and "missing.yaml" in bad.stderr
+    assert bad.stdout == "handler ran\n"
+
+
+def test_the_command_waits_for_a_thread_that_is_still_running():
+    # a non-daemon thread still alive at the end: the normal exit, which waits for it
+    before = (
+        "t = threading.Thread(target=lambda: (time.sleep(1.0), print('thread done', flush=True)))"
+        "\nt.start()"
+    )
+    proc = _as_the_command("check scenes/bounce.yaml", before)
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stdout.rstrip().endswith("thread done")
