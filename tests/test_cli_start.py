@@ -115,3 +115,25 @@ def test_the_command_waits_for_a_thread_that_is_still_running():
     proc = _as_the_command("check scenes/bounce.yaml", before)
     assert proc.returncode == 0, proc.stderr
     assert proc.stdout.rstrip().endswith("thread done")
+
+
+def test_isaac_run_pauses_the_collector_only_as_the_command_and_runs_it_again():
+    import gc
+
+    from isaac.app.run import _pause_collector, _settle_collector
+
+    called = argparse.Namespace(owns_process=False)  # a program's call: its collector is its own
+    assert _pause_collector(called) is False and gc.isenabled()
+    command = argparse.Namespace(owns_process=True)
+    frozen = gc.get_freeze_count()
+    try:
+        running = _pause_collector(command)
+        assert running is True and not gc.isenabled()
+        kept = [object() for _ in range(10)]  # start-up's objects
+        assert _settle_collector(running) is False
+        assert gc.isenabled()  # collecting again for the run itself
+        assert gc.get_freeze_count() >= frozen + len(kept)  # ... without start-up's objects
+        assert _settle_collector(False) is False and gc.isenabled()
+    finally:
+        gc.unfreeze()
+        gc.enable()

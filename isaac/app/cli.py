@@ -139,6 +139,9 @@ def _main(argv: list[str] | None, words: list[str]) -> int:
     reuse_large_buffers()
     parser = build_parser(words[0] if words else None)
     args = parser.parse_args(argv)
+    # whether the command is this process's only job (the `isaac` command itself, not a call
+    # from a program): it may then tune the process (`isaac run`'s collector, see run.py)
+    args.owns_process = argv is None and _is_the_command()
     try:
         status = args.func(args)
     except IsaacError as exc:

@@ -239,24 +239,57 @@ def _start_writers(offload: str, claims: dict) -> dict:
     return children
 
 
-def _say_if_compiling(scene) -> None:
-    """One line on stderr when numba's cache lacks the step's kernels (the first run on a
-    machine, or after the engine changed): the run then compiles them before its first step,
-    which took 11-13 s for the stages and 19 s more for the compiled driver on the 2-core
-    machine at load 2-3 (bench/README.md), where a new user would otherwise see nothing."""
+def _compiling(scene, *, say: bool) -> bool:
+    """Whether numba's cache lacks the step's kernels (the first run on a machine, or after
+    the engine changed): the run then compiles them before its first step, which took 11-13 s
+    for the stages and 19 s more for the compiled driver on the 2-core machine at load 2-3
+    (bench/README.md). say: one line on stderr then, where a new user would otherwise see
+    nothing."""
     from isaac.engine.compile_ahead import is_cold, solver_kernel
     from isaac.engine.step import StepSettings
 
-    if is_cold(solver_kernel(StepSettings.of(scene.world))):
+    cold = is_cold(solver_kernel(StepSettings.of(scene.world)))
+    if cold and say:
         print(
             "compiling the engine's kernels into numba's cache before the first step (a first "
             "run takes 15-40 s; later runs load them in under a second)",
             file=sys.stderr,
         )
+    return cold
+
+
+def _pause_collector(args: argparse.Namespace) -> bool:
+    """As the `isaac` command (``args.owns_process``): pause Python's cyclic collector until
+    `_settle_collector`. Why: importing numpy, numba and the engine and loading the kernels
+    makes some 500,000 objects that live as long as the process, and the collector walked them
+    all, to free nothing, 40-60 ms of a 0.45 s start (2-core machine). Returns whether it was
+    running (False when not paused)."""
+    if not getattr(args, "owns_process", False):
+        return False
+    import gc
+
+    running = gc.isenabled()
+    gc.disable()
+    return running
+
+
+def _settle_collector(running: bool) -> bool:
+    """Once the run is set up (or before kernels are compiled, which makes garbage the
+    collector must free): what start-up made is frozen out of every later collection
+    (`gc.freeze`: never walked, never freed by the collector; a command's process ends with
+    its run), and the collector runs again if `_pause_collector` paused it. Returns False (so
+    a second call does nothing)."""
+    if running:
+        import gc
+
+        gc.freeze()
+        gc.enable()
+    return False
 
 
 def cmd_run(args: argparse.Namespace) -> int:
     started = time.perf_counter()
+    collector_running = _pause_collector(args)
     # the outputs are claimed and the Rerun sender started before the scene is read (which
     # imports numpy and numba): the sender's import of rerun-sdk, the longest part of a short
     # recorded run, starts 0.15-0.2 s sooner
@@ -279,8 +312,8 @@ def cmd_run(args: argparse.Namespace) -> int:
         # imported here, after the writers started: compiling kernels is not needed for --help
         from isaac.engine.simulation import Simulation
 
-        if not args.quiet:
-            _say_if_compiling(scene)
+        if _compiling(scene, say=not args.quiet):
+            collector_running = _settle_collector(collector_running)
         sim = Simulation(scene, profile=args.profile)  # --profile: the timed driver
     except BaseException:
         for child in children.values():
@@ -321,6 +354,7 @@ def cmd_run(args: argparse.Namespace) -> int:
             from tqdm import tqdm
 
             progress = tqdm(total=steps, unit="step", desc=scene.name, leave=False)
+        collector_running = _settle_collector(collector_running)
         loop_start = time.perf_counter()
         # whole batches of steps per compiled call (`Simulation.batches`); a stop request is
         # acted on between batches, which are small enough to keep that prompt
