@@ -490,8 +490,9 @@ def markdown(meta, rows, growth_rows, startup_rows, recs, targets) -> str:
                 )
         lines += [
             "",
-            "Start-up: whole `python -c` process (import, build pyramid-10, first step); "
-            "first run with an empty NUMBA_CACHE_DIR.",
+            "Start-up: a `python -c` process (import, build pyramid-10, first step), from its "
+            "start to the first step's end; the last column, the whole process (its teardown "
+            "too); first run with an empty NUMBA_CACHE_DIR.",
             "",
         ]
     for rec in recs:

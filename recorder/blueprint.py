@@ -125,7 +125,6 @@ def annotation_context() -> rr.AnnotationContext:
         {
             "class_id": k.class_id,
             "class_description": {
-                # colour: 0xRRGGBBAA, opaque (Rerun's packing of an RGB triple)
                 "info": {"id": k.class_id, "label": k.label, "color": _rgba(k.rgb)},
                 "keypoint_annotations": [],
                 "keypoint_connections": [],
@@ -138,6 +137,7 @@ def annotation_context() -> rr.AnnotationContext:
 
 
 def _rgba(rgb: tuple[int, int, int]) -> int:
+    """An opaque colour as Rerun packs an RGB triple: 0xRRGGBBAA."""
     r, g, b = rgb
     return (r << 24) | (g << 16) | (b << 8) | 0xFF
 
