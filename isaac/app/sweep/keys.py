@@ -254,6 +254,7 @@ class _Emitter:
         self.values = values  # {(id(container), key): node}
         self.parts: list[str] = []
         self.line = 1
+        self.value_lines: dict = {}  # {(id(container), key): the line its value is written on}
 
     def goto(self, line: int) -> None:
         # determinism and messages: each base node starts on its own line of the scene file;
@@ -279,6 +280,8 @@ class _Emitter:
                 self.parts.append(_quoted(k.value) + ": ")
                 seen.add(k.value)
                 swapped = self.values.get((id(node), k.value))
+                if swapped is not None:
+                    self.value_lines[id(node), k.value] = self.line
                 self.node(v if swapped is None else swapped, own and swapped is None)
             for (container, key), v in self.values.items():
                 if container == id(node) and isinstance(key, str) and key not in seen:
@@ -286,6 +289,7 @@ class _Emitter:
                         self.parts.append(", ")
                     first = False
                     self.parts.append(_quoted(key) + ": ")
+                    self.value_lines[container, key] = self.line
                     self.node(v, False)
             self.parts.append("}")
         elif isinstance(node, SequenceNode):
@@ -294,6 +298,8 @@ class _Emitter:
                 if i:
                     self.parts.append(", ")
                 swapped = self.values.get((id(node), i))
+                if swapped is not None:
+                    self.value_lines[id(node), i] = self.line
                 self.node(v if swapped is None else swapped, own and swapped is None)
             self.parts.append("]")
         else:
@@ -317,6 +323,17 @@ def emit(root, values: dict) -> str:
     e.node(root, True)
     e.parts.append("\n")
     return "".join(e.parts)
+
+
+def emit_lines(root, values: dict) -> tuple[str, dict]:
+    """`emit`'s text and {(id(container), key): line}: the line of that text on which each value
+    of `values` is written. A swapped value is written on the line the emitter is on (never on
+    one of its own), so its line depends on the base tree and the places swapped, not on the
+    values: what the scene loader reads as the value's line from the text."""
+    e = _Emitter(values)
+    e.node(root, True)
+    e.parts.append("\n")
+    return "".join(e.parts), e.value_lines
 
 
 def value_node(value) -> ScalarNode:
