@@ -324,7 +324,7 @@ def survey(polygons) -> PolygonFacts:
                 problems[part[j]] = (
                     "the vertices are clockwise (a scene stores them counter-clockwise)"
                 )
-    if n <= _SURVEYED_MOST:
+    if n <= _REMEMBER_MOST:
         for index, vertices in enumerate(polygons):
             if _immutable(vertices) and id(vertices) not in _SURVEYED:
                 if len(_SURVEYED) >= _SURVEYED_MOST:
@@ -346,9 +346,11 @@ def survey(polygons) -> PolygonFacts:
 # id is not reused): the scene loader gives every box of one size the same tuple (loader._box),
 # so a sweep that reads one scene many times surveys its boxes once. A polygon's results depend
 # on its own vertices alone, and a tuple of tuples of floats cannot change: the same bits. Only
-# for small calls (a big scene's many polygons are mostly new each time).
+# the polygons of small calls are remembered (a pile's 100 polygons are new each time: looking
+# them over would cost about 1% of its load, for nothing).
 _SURVEYED: dict[int, tuple] = {}
 _SURVEYED_MOST = 256
+_REMEMBER_MOST = 32  # polygons in a call whose results are remembered
 
 
 def _immutable(vertices) -> bool:
