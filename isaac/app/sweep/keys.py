@@ -7,7 +7,10 @@ the base scene's YAML with the swept values put in, read by `isaac.scene.load_sc
 any other. The tree is composed once (isaac.scene.reader: line marks, our scalar rules); each run
 only swaps a few nodes (`Slot`), and `emit` writes the tree as flow YAML in which every node of
 the base scene stays on its own line, so an error the loader finds in a part of the scene the
-sweep did not touch names the scene file's real line.
+sweep did not touch names the scene file's real line. A sweep's check does not write that text
+for every run: `Sweep.load_run` puts the run's values into the tree itself, each on the line
+`emit_lines` says the text gives it, and has the loader read the tree (the same Scene); a run
+refused that way is read again from `emit`'s text, whose message it gets.
 """
 
 from __future__ import annotations
