@@ -99,3 +99,28 @@ def test_nearly_collinear_vertex_on_a_convex_polygon_is_accepted():
 def test_invalid_polygon_raises_value_error_naming_the_reason(vertices, reason):
     with pytest.raises(ValueError, match=reason):
         validate_polygon(vertices)
+
+
+def test_a_vertex_tuple_surveyed_again_gives_the_bits_of_a_fresh_survey():
+    from isaac.scene import polygon
+
+    box = ((-0.5, -0.25), (-0.5, 0.25), (0.5, 0.25), (0.5, -0.25))  # clockwise: a problem
+    shapes = [
+        tuple((float(x), float(y)) for x, y in box_vertices(1.0, 0.3)),
+        tuple((float(x), float(y)) for x, y in regular_vertices(7, 0.4, 0.1)),
+        box,
+        ((0.0, 0.0), (1.0, 0.0)),
+    ]
+    first = polygon.survey(shapes)
+    assert all(id(s) in polygon._SURVEYED for s in shapes)
+    again = polygon.survey(shapes)  # from the memo
+    fresh = polygon.survey([tuple(tuple(p) for p in s) for s in shapes])  # equal, new tuples
+    for facts in (again, fresh):
+        assert facts.problems == first.problems
+        for name in ("extents", "largest_coordinates", "areas", "second_moments"):
+            assert getattr(facts, name).tobytes() == getattr(first, name).tobytes()
+    assert first.problems[2] is not None and first.problems[3] is not None
+    # a list (mutable) is surveyed each time, never remembered
+    listed = [list(p) for p in shapes[0]]
+    polygon.survey([listed])
+    assert id(listed) not in polygon._SURVEYED

@@ -873,6 +873,24 @@ def load_scene_text(text: str, source: str = "<text>", *, default_name: str | No
             gc.enable()
 
 
+def read_scene_tree(root, source: str = "<text>", *, default_name: str | None = None) -> Scene:
+    """Check and expand the scene node tree `root`, as `load_scene_text` does the tree it
+    composes from YAML text (isaac.scene.reader.compose); `source` names it in messages and
+    in `Scene.source`. For a caller that holds a composed tree and changes a few of its nodes
+    between reads (isaac.app.sweep: one scene, many runs), so as not to write and compose the
+    whole text again each time. Raises SceneError like `load_scene_text`; its lines are the
+    nodes' own."""
+    collecting = gc.isenabled()
+    gc.disable()  # as in load_scene_text: the readers' many small objects
+    try:
+        return _read_scene(Reader(source), root, default_name or "scene")
+    except RecursionError:
+        raise SceneError("the document is nested too deeply", source=source) from None
+    finally:
+        if collecting:
+            gc.enable()
+
+
 def _read_head(r: Reader, root, default_name: str):
     """(mapping, name, world, analytic) of the scene mapping `root`."""
     m = r.mapping(root, "", _SCENE_KEYS)

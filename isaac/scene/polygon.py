@@ -282,6 +282,12 @@ def survey(polygons) -> PolygonFacts:
     second_moments = np.full(n, np.nan)
     groups: dict[int, list[int]] = {}
     for index, vertices in enumerate(polygons):
+        known = _SURVEYED.get(id(vertices))
+        if known is not None and known[0] is vertices:
+            problems[index], extents[index], largest[index], areas[index], second_moments[index] = (
+                known[1]
+            )
+            continue
         k = len(vertices)
         if k < 3:
             problems[index] = f"a polygon needs at least 3 vertices, got {k}"
@@ -318,7 +324,39 @@ def survey(polygons) -> PolygonFacts:
                 problems[part[j]] = (
                     "the vertices are clockwise (a scene stores them counter-clockwise)"
                 )
+    if n <= _REMEMBER_MOST:
+        for index, vertices in enumerate(polygons):
+            if _immutable(vertices) and id(vertices) not in _SURVEYED:
+                if len(_SURVEYED) >= _SURVEYED_MOST:
+                    _SURVEYED.clear()
+                _SURVEYED[id(vertices)] = (
+                    vertices,
+                    (
+                        problems[index],
+                        float(extents[index]),
+                        float(largest[index]),
+                        float(areas[index]),
+                        float(second_moments[index]),
+                    ),
+                )
     return PolygonFacts(problems, extents, largest, areas, second_moments)
+
+
+# `survey`'s results for the vertex tuples it saw last, by the tuple itself (kept here, so its
+# id is not reused): the scene loader gives every box of one size the same tuple (loader._box),
+# so a sweep that reads one scene many times surveys its boxes once. A polygon's results depend
+# on its own vertices alone, and a tuple of tuples of floats cannot change: the same bits. Only
+# the polygons of small calls are remembered (a pile's 100 polygons are new each time: looking
+# them over would cost about 1% of its load, for nothing).
+_SURVEYED: dict[int, tuple] = {}
+_SURVEYED_MOST = 256
+_REMEMBER_MOST = 32  # polygons in a call whose results are remembered
+
+
+def _immutable(vertices) -> bool:
+    return type(vertices) is tuple and all(
+        type(p) is tuple and all(type(c) is float for c in p) for p in vertices
+    )
 
 
 def _pairs_problem(vertices) -> str | None:

@@ -7,7 +7,10 @@ the base scene's YAML with the swept values put in, read by `isaac.scene.load_sc
 any other. The tree is composed once (isaac.scene.reader: line marks, our scalar rules); each run
 only swaps a few nodes (`Slot`), and `emit` writes the tree as flow YAML in which every node of
 the base scene stays on its own line, so an error the loader finds in a part of the scene the
-sweep did not touch names the scene file's real line.
+sweep did not touch names the scene file's real line. A sweep's check does not write that text
+for every run: `Sweep.load_run` puts the run's values into the tree itself, each on the line
+`emit_lines` says the text gives it, and has the loader read the tree (the same Scene); a run
+refused that way is read again from `emit`'s text, whose message it gets.
 """
 
 from __future__ import annotations
@@ -254,6 +257,7 @@ class _Emitter:
         self.values = values  # {(id(container), key): node}
         self.parts: list[str] = []
         self.line = 1
+        self.value_lines: dict = {}  # {(id(container), key): the line its value is written on}
 
     def goto(self, line: int) -> None:
         # determinism and messages: each base node starts on its own line of the scene file;
@@ -279,6 +283,8 @@ class _Emitter:
                 self.parts.append(_quoted(k.value) + ": ")
                 seen.add(k.value)
                 swapped = self.values.get((id(node), k.value))
+                if swapped is not None:
+                    self.value_lines[id(node), k.value] = self.line
                 self.node(v if swapped is None else swapped, own and swapped is None)
             for (container, key), v in self.values.items():
                 if container == id(node) and isinstance(key, str) and key not in seen:
@@ -286,6 +292,7 @@ class _Emitter:
                         self.parts.append(", ")
                     first = False
                     self.parts.append(_quoted(key) + ": ")
+                    self.value_lines[container, key] = self.line
                     self.node(v, False)
             self.parts.append("}")
         elif isinstance(node, SequenceNode):
@@ -294,6 +301,8 @@ class _Emitter:
                 if i:
                     self.parts.append(", ")
                 swapped = self.values.get((id(node), i))
+                if swapped is not None:
+                    self.value_lines[id(node), i] = self.line
                 self.node(v if swapped is None else swapped, own and swapped is None)
             self.parts.append("]")
         else:
@@ -317,6 +326,17 @@ def emit(root, values: dict) -> str:
     e.node(root, True)
     e.parts.append("\n")
     return "".join(e.parts)
+
+
+def emit_lines(root, values: dict) -> tuple[str, dict]:
+    """`emit`'s text and {(id(container), key): line}: the line of that text on which each value
+    of `values` is written. A swapped value is written on the line the emitter is on (never on
+    one of its own), so its line depends on the base tree and the places swapped, not on the
+    values: what the scene loader reads as the value's line from the text."""
+    e = _Emitter(values)
+    e.node(root, True)
+    e.parts.append("\n")
+    return "".join(e.parts), e.value_lines
 
 
 def value_node(value) -> ScalarNode:

@@ -9,6 +9,7 @@ from __future__ import annotations
 import hashlib
 import math
 import os
+import threading
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -19,11 +20,13 @@ from isaac.app.sweep import keys
 from isaac.app.sweep.metrics import METRICS
 from isaac.errors import SceneError
 from isaac.scene import load_scene_text
-from isaac.scene.limits import MAX_STEPS
+from isaac.scene.limits import MAX_SCENE_BYTES, MAX_STEPS, MAX_YAML_BYTES
+from isaac.scene.loader import read_scene_tree
 from isaac.scene.reader import (
     MappingNode,
     Reader,
     ScalarNode,
+    SequenceNode,
     compose,
     join_path,
     shown,
@@ -73,6 +76,9 @@ class Sweep:
     final_bodies: tuple[str, ...]
     runs_line: int
     n_runs: int = 0
+    # the line of each axis's value in a run's text (keys.emit_lines), or False where runs are
+    # read from their text (`load_run`); worked out on first use
+    value_lines: list | bool | None = field(default=None, repr=False, compare=False)
 
     @property
     def axes(self) -> list[Axis]:
@@ -107,6 +113,91 @@ class Sweep:
     def run_scene_text(self, index: int) -> str:
         values = {(id(a.slot.container), a.slot.key): node for a, node, _ in self.draws(index)}
         return keys.emit(self.root, values)
+
+    def load_run(self, index: int, draws=None):
+        """Run `index`'s Scene (`draws`: its `draws(index)`, when known), or the SceneError of
+        the scene loader: the same Scene, and the same verdict, as `load_scene_text` of
+        `run_scene_text(index)`, without writing and composing that text. The run's values
+        are put into the base scene's node tree, each on the line the text would have it on,
+        the tree is read by the loader (isaac.scene.loader.read_scene_tree) and the base tree
+        is put back. A run the tree's reading refuses is read again from its text, whose
+        verdict (and message) it then is; so is a run with a list or mapping as a value (a
+        grid value that is a list), where the text's node limits could differ."""
+        draws = self.draws(index) if draws is None else draws
+        lines = self._value_lines()
+        if lines and all(type(node) is ScalarNode for _, node, _ in draws):
+            with _TREE_LOCK:
+                undo = []
+                try:
+                    for (axis, node, _), line in zip(draws, lines):
+                        undo.append(_put(axis.slot, ScalarNode(node.value, line, node.style)))
+                    return read_scene_tree(self.root, self.scene_path, default_name=self.scene_name)
+                except SceneError:
+                    pass  # read from the text below: its verdict and message
+                finally:
+                    for put_back in reversed(undo):
+                        put_back()
+        values = {(id(a.slot.container), a.slot.key): node for a, node, _ in draws}
+        return load_scene_text(
+            keys.emit(self.root, values), source=self.scene_path, default_name=self.scene_name
+        )
+
+    def _value_lines(self):
+        """`value_lines`, worked out once: False when a run's text could be refused for its
+        size or shape where its tree is not (the text near MAX_YAML_BYTES, or run 0's text
+        refused by the YAML composer, whose node counts every run of scalar values shares)."""
+        if self.value_lines is None:
+            draws = self.draws(0)
+            values = {(id(a.slot.container), a.slot.key): node for a, node, _ in draws}
+            text, where = keys.emit_lines(self.root, values)
+            room = sum(len(a.key) + 64 + _longest_value(a) for a in self.axes)
+            try:
+                compose(text, self.scene_path)
+                ok = len(text) + room < min(MAX_YAML_BYTES, MAX_SCENE_BYTES)
+            except SceneError:
+                ok = False
+            keyed = [(id(a.slot.container), a.slot.key) for a, _, _ in draws]
+            self.value_lines = [where[k] for k in keyed] if ok else False
+        return self.value_lines
+
+
+_TREE_LOCK = threading.Lock()  # `Sweep.load_run` edits the base tree while it reads it
+
+
+def _put(slot: keys.Slot, node):
+    """Put `node` at `slot` of the base tree (as `keys.emit` writes it: in place of the value
+    the scene gives, else as a key added at the end of its mapping); returns the undo."""
+    c, key = slot.container, slot.key
+    if isinstance(c, SequenceNode):
+        old = c.value[key]
+        c.value[key] = node
+
+        def undo_item():
+            c.value[key] = old
+
+        return undo_item
+    for j, (k, v) in enumerate(c.value):
+        if k.value == key:
+            c.value[j] = (k, node)
+
+            def undo_value(j=j, pair=(k, v)):
+                c.value[j] = pair
+
+            return undo_value
+    c.value.append((ScalarNode(key, node.line, '"'), node))
+
+    def undo_key():
+        c.value.pop()
+
+    return undo_key
+
+
+def _longest_value(axis: Axis) -> int:
+    """Characters the longest value of `axis` may take in a run's text (a bound)."""
+    nodes = [n for n, _, _ in axis.values]
+    if axis.dist is not None and axis.dist[0] == "choice":
+        nodes = [n for n, _ in axis.dist[1]]
+    return max([32] + [2 * len(getattr(n, "value", "")) + 8 for n in nodes])
 
 
 def stream(seed: int, sample: int, key: str) -> np.random.Generator:
@@ -389,10 +480,8 @@ def load_runs(sweep: Sweep, indices, keep: bool = True, budget: float | None = N
         if until is not None and time.perf_counter() > until:
             break
         draws = sweep.draws(index)
-        values = {(id(a.slot.container), a.slot.key): node for a, node, _ in draws}
-        text = keys.emit(sweep.root, values)
         try:
-            scene = load_scene_text(text, source=sweep.scene_path, default_name=sweep.scene_name)
+            scene = sweep.load_run(index, draws)
         except SceneError:
             refused = index
             break

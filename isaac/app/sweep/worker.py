@@ -399,7 +399,6 @@ def run_one(
     from isaac.app.sweep.metrics import Measure
     from isaac.engine.simulation import Simulation
     from isaac.errors import IsaacError
-    from isaac.scene import load_scene_text
 
     clock = clock or _NoClock()
     clock.start()
@@ -413,11 +412,7 @@ def run_one(
     measure = None
     try:
         if scene is None:
-            scene = load_scene_text(
-                sweep.run_scene_text(index),
-                source=sweep.scene_path,
-                default_name=sweep.scene_name,
-            )
+            scene = sweep.load_run(index)
         clock.lap("scene")
         sim = Simulation(scene)
         clock.lap("build")
