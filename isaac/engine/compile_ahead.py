@@ -123,12 +123,34 @@ def prepare(settings, world, joints: bool = False) -> None:
             small.model, small.settings, small.dt, small.state, small.work, small.cache, solve=False
         )
         diverged_body(small.state)
+        _compile_driver_helpers(small)
         helper.wait(timeout=HELPER_TIMEOUT_S)
     except BaseException as exc:  # Ctrl-C, a failure here, a stuck helper: no orphan left
         helper.kill()
         helper.wait()
         if not isinstance(exc, subprocess.TimeoutExpired):
             raise
+
+
+def _compile_driver_helpers(small) -> None:
+    """The driver's own small kernels (`isaac.engine.driver`: undo copies, carried contacts,
+    existence, batch rows), on the bundles a `Stepper` of the small world passes, so that
+    the driver's compile, which runs on one core after the helper is done, loads them from the
+    cache instead of compiling them (this process finishes its stages before the solver's
+    helper: the time is free)."""
+    from isaac.engine import driver
+
+    model, state = small.model, small.state
+    stepper = driver.Stepper(model, small.settings, small.dt, small.work)
+    pose = (state.position, state.angle, state.velocity, state.angular_velocity, state.exists)
+    saved = tuple(a.copy() for a in pose)
+    driver._copy_pose(pose, saved)
+    driver._copy_carry(stepper.carry, stepper.saved_carry, 0)
+    driver.carry_over(stepper.scratch, 0, model.n_bodies, stepper.carry)
+    batch = stepper.new_batch(1)
+    driver.keep_rows(batch, 0, stepper.scratch, 0, 0)
+    driver._keep_state(batch, 0, saved, 0)
+    driver._set_existence(model.enters_at, model.leaves_at, saved[4], 0.0)
 
 
 def finish() -> None:
