@@ -5,7 +5,10 @@ each: geometry, broad phase, narrow phase, push-out, impulses, integration; exis
 at their times; the divergence check after each step). They call the same stage kernels, in
 the same order, as `isaac.engine.step.substep`, so every path gives the same bits. Two drivers,
 one per solver, so that a run compiles only the solver it uses (numba types every branch of a
-function, and the sequential solver is most of the compile time).
+function, and the sequential solver is most of the compile time); and `run_steps_sequential_joints`
+for a scene with joints, so that every other scene's driver never types, compiles or links the
+joints' kernels (nor the solver's joint passes: `solve_sequential` on joints None), a third of
+the driver's code and its first compile (the default scene's first run: bench/README.md).
 
 Arguments are named bundles of arrays (`Bodies`, `Pose`, `Scratch`, `Carry`, `Settings`,
 `Batch`), crossed into compiled code once per call: their cost is paid per batch of steps,
@@ -484,29 +487,29 @@ def _run_steps(
                     cfg.restitution_threshold, cfg.friction_on, cfg.h, c_impulse, c_tangent,
                     c_restitution, push_a, push_b,
                 )  # fmt: skip
-            elif not seed and jointed and (rows > 0 or n_joints > 0):
+            elif not seed:
                 # (the previous impulses whole: rows name their previous row by index)
-                need = solve_sequential(
-                    rows, c_a, c_b, c_feature, c_slot, c_point, c_normal, c_depth, c_previous,
-                    position, velocity, angular_velocity, inv_mass, inv_inertia, gravity_dv,
-                    restitution, friction, cfg.restitution_rule, cfg.friction_rule,
-                    cfg.restitution_threshold, cfg.friction_on, cfg.iterations,
-                    cfg.warm_starting, cfg.h, prev_impulse, prev_tangent, c_impulse, c_tangent,
-                    c_restitution, push_a, push_b, table, joint_fields, joint_scratch,
-                )  # fmt: skip
-                if need > 0:
-                    status = NEED_TABLE
-                    break
-            elif not seed and not jointed and rows > 0:
-                # (the solver's specialisation without the joints' code: see solve_sequential)
-                need = solve_sequential(
-                    rows, c_a, c_b, c_feature, c_slot, c_point, c_normal, c_depth, c_previous,
-                    position, velocity, angular_velocity, inv_mass, inv_inertia, gravity_dv,
-                    restitution, friction, cfg.restitution_rule, cfg.friction_rule,
-                    cfg.restitution_threshold, cfg.friction_on, cfg.iterations,
-                    cfg.warm_starting, cfg.h, prev_impulse, prev_tangent, c_impulse, c_tangent,
-                    c_restitution, push_a, push_b, table, None, None,
-                )  # fmt: skip
+                if jointed:
+                    if rows > 0 or n_joints > 0:
+                        need = solve_sequential(
+                            rows, c_a, c_b, c_feature, c_slot, c_point, c_normal, c_depth,
+                            c_previous, position, velocity, angular_velocity, inv_mass,
+                            inv_inertia, gravity_dv, restitution, friction, cfg.restitution_rule,
+                            cfg.friction_rule, cfg.restitution_threshold, cfg.friction_on,
+                            cfg.iterations, cfg.warm_starting, cfg.h, prev_impulse, prev_tangent,
+                            c_impulse, c_tangent, c_restitution, push_a, push_b, table,
+                            joint_fields, joint_scratch,
+                        )  # fmt: skip
+                elif rows > 0:
+                    # the solver's specialisation without the joints' code (solve_sequential)
+                    need = solve_sequential(
+                        rows, c_a, c_b, c_feature, c_slot, c_point, c_normal, c_depth, c_previous,
+                        position, velocity, angular_velocity, inv_mass, inv_inertia, gravity_dv,
+                        restitution, friction, cfg.restitution_rule, cfg.friction_rule,
+                        cfg.restitution_threshold, cfg.friction_on, cfg.iterations,
+                        cfg.warm_starting, cfg.h, prev_impulse, prev_tangent, c_impulse,
+                        c_tangent, c_restitution, push_a, push_b, table, None, None,
+                    )  # fmt: skip
                 if need > 0:
                     status = NEED_TABLE
                     break
@@ -574,7 +577,7 @@ def _run_steps(
 @numba.njit(cache=True, nogil=True)
 def run_steps_sequential(
     bodies, cfg, pose, work, carry, saved_pose, saved_carry, batch, table, start, carried, first,
-    k, record, clock, joints,
+    k, record, clock,
 ):  # fmt: skip
     """Advance the pose by up to k steps from state index `first` with the sequential solver,
     writing the batch from index `start` when `record`.
@@ -582,20 +585,65 @@ def run_steps_sequential(
     Every bundle arrives as a plain tuple of its fields (`Bodies`, `Settings`, `Pose`, `Scratch`,
     `Carry`, `Pose` and `Carry` of the same sizes for undoing a step, `Batch`); table: the
     solver's scratch (`isaac.engine.solver.sequential`); carried: how many Carry rows are
-    valid; clock: (1 + len(STAGES),) int64, which only the timed drivers write; joints: None
-    for a scene without joints (numba prunes on the argument's type: that specialisation never
-    types, compiles or links the joints' kernels, nor the solver's joint passes, about half the
-    driver's first compile), True otherwise. Returns (status,
+    valid; clock: (1 + len(STAGES),) int64, which only the timed drivers write. A scene
+    without joints only (`run_steps_sequential_joints` otherwise): this driver never types,
+    compiles or links the joints' kernels nor the solver's joint passes. Returns (status,
     steps taken, carried, body, field, pairs, rows or scratch entries needed, carried at the
     start of the last step): status DONE, or DIVERGED / NEED_PAIRS / NEED_ROWS / NEED_TABLE
     with the step that did it undone (body, field:
     `first_diverged`'s). On return `saved_pose` / `saved_carry` hold the start of the last step
     taken (or undone), which `Stepper.redo_last` computes again to record it."""
-    if joints is None:  # (pruned on the argument's type: one specialisation without joints)
-        return _run_steps(
-            False, False, False, bodies, Settings(*cfg), pose, work, carry, saved_pose,
-            saved_carry, batch, table, start, carried, first, k, record, clock,
-        )  # fmt: skip
+    return _run_steps(
+        False, False, False, bodies, Settings(*cfg), pose, work, carry, saved_pose,
+        saved_carry, batch, table, start, carried, first, k, record, clock,
+    )  # fmt: skip
+
+
+@numba.njit(cache=True, nogil=True)
+def run_steps_seed(
+    bodies, cfg, pose, work, carry, saved_pose, saved_carry, batch, table, start, carried, first,
+    k, record, clock,
+):  # fmt: skip
+    """`run_steps_sequential` with the seed's single-pass solver."""
+    return _run_steps(
+        True, False, False, bodies, Settings(*cfg), pose, work, carry, saved_pose,
+        saved_carry, batch, table, start, carried, first, k, record, clock,
+    )  # fmt: skip
+
+
+@numba.njit(cache=True, nogil=True)
+def run_steps_sequential_timed(
+    bodies, cfg, pose, work, carry, saved_pose, saved_carry, batch, table, start, carried, first,
+    k, record, clock,
+):  # fmt: skip
+    """`run_steps_sequential` that also adds each stage's time to `clock` (ns: clock[0] the
+    whole call, clock[1 + i] stage STAGES[i]); the same bits."""
+    return _run_steps(
+        False, True, False, bodies, Settings(*cfg), pose, work, carry, saved_pose,
+        saved_carry, batch, table, start, carried, first, k, record, clock,
+    )  # fmt: skip
+
+
+@numba.njit(cache=True, nogil=True)
+def run_steps_seed_timed(
+    bodies, cfg, pose, work, carry, saved_pose, saved_carry, batch, table, start, carried, first,
+    k, record, clock,
+):  # fmt: skip
+    """`run_steps_seed` that also adds each stage's time to `clock`, as
+    `run_steps_sequential_timed` does."""
+    return _run_steps(
+        True, True, False, bodies, Settings(*cfg), pose, work, carry, saved_pose,
+        saved_carry, batch, table, start, carried, first, k, record, clock,
+    )  # fmt: skip
+
+
+@numba.njit(cache=True, nogil=True)
+def run_steps_sequential_joints(
+    bodies, cfg, pose, work, carry, saved_pose, saved_carry, batch, table, start, carried, first,
+    k, record, clock,
+):  # fmt: skip
+    """`run_steps_sequential` for a scene with joints: the joints' kernels and the solver's
+    joint passes (the seed's solver has no joint rows: a scene with joints cannot choose it)."""
     return _run_steps(
         False, False, True, bodies, Settings(*cfg), pose, work, carry, saved_pose, saved_carry,
         batch, table, start, carried, first, k, record, clock,
@@ -603,54 +651,14 @@ def run_steps_sequential(
 
 
 @numba.njit(cache=True, nogil=True)
-def run_steps_seed(
+def run_steps_sequential_joints_timed(
     bodies, cfg, pose, work, carry, saved_pose, saved_carry, batch, table, start, carried, first,
-    k, record, clock, joints,
+    k, record, clock,
 ):  # fmt: skip
-    """`run_steps_sequential` with the seed's single-pass solver."""
-    if joints is None:  # (pruned on the argument's type: one specialisation without joints)
-        return _run_steps(
-            True, False, False, bodies, Settings(*cfg), pose, work, carry, saved_pose,
-            saved_carry, batch, table, start, carried, first, k, record, clock,
-        )  # fmt: skip
-    return _run_steps(
-        True, False, True, bodies, Settings(*cfg), pose, work, carry, saved_pose, saved_carry,
-        batch, table, start, carried, first, k, record, clock,
-    )  # fmt: skip
-
-
-@numba.njit(cache=True, nogil=True)
-def run_steps_sequential_timed(
-    bodies, cfg, pose, work, carry, saved_pose, saved_carry, batch, table, start, carried, first,
-    k, record, clock, joints,
-):  # fmt: skip
-    """`run_steps_sequential` that also adds each stage's time to `clock` (ns: clock[0] the
-    whole call, clock[1 + i] stage STAGES[i]); the same bits."""
-    if joints is None:  # (pruned on the argument's type: one specialisation without joints)
-        return _run_steps(
-            False, True, False, bodies, Settings(*cfg), pose, work, carry, saved_pose,
-            saved_carry, batch, table, start, carried, first, k, record, clock,
-        )  # fmt: skip
+    """`run_steps_sequential_joints` that also adds each stage's time to `clock`, as
+    `run_steps_sequential_timed` does."""
     return _run_steps(
         False, True, True, bodies, Settings(*cfg), pose, work, carry, saved_pose, saved_carry,
-        batch, table, start, carried, first, k, record, clock,
-    )  # fmt: skip
-
-
-@numba.njit(cache=True, nogil=True)
-def run_steps_seed_timed(
-    bodies, cfg, pose, work, carry, saved_pose, saved_carry, batch, table, start, carried, first,
-    k, record, clock, joints,
-):  # fmt: skip
-    """`run_steps_seed` that also adds each stage's time to `clock`, as
-    `run_steps_sequential_timed` does."""
-    if joints is None:  # (pruned on the argument's type: one specialisation without joints)
-        return _run_steps(
-            True, True, False, bodies, Settings(*cfg), pose, work, carry, saved_pose,
-            saved_carry, batch, table, start, carried, first, k, record, clock,
-        )  # fmt: skip
-    return _run_steps(
-        True, True, True, bodies, Settings(*cfg), pose, work, carry, saved_pose, saved_carry,
         batch, table, start, carried, first, k, record, clock,
     )  # fmt: skip
 
@@ -702,13 +710,20 @@ class Stepper:
                 bool(model.filtered),
             )
         )  # fmt: skip
-        if timed:
+        jointed = model.joints.kind.shape[0] > 0
+        if s.seed_solver and jointed:
+            raise ValueError(
+                "the seed's solver has no joint rows: a scene with joints cannot use it"
+            )
+        if jointed:  # (a driver without the joints' code for every other scene)
+            self.kernel = (
+                run_steps_sequential_joints_timed if timed else run_steps_sequential_joints
+            )
+        elif timed:
             self.kernel = run_steps_seed_timed if s.seed_solver else run_steps_sequential_timed
         else:
             self.kernel = run_steps_seed if s.seed_solver else run_steps_sequential
         self.clock = np.zeros(1 + len(STAGES), dtype=np.int64)  # ns (the timed driver's)
-        # the driver's specialisation: None compiles one without the joints' code
-        self.joints = True if model.joints.kind.shape[0] else None
         self.substeps = int(s.substeps)
         self._sized_for = -1
         self.carried = 0
@@ -831,7 +846,7 @@ class Stepper:
         status, done, carried, body, field, need, last_carried = self.kernel(
             self.bodies, self.settings, pose, self.scratch, carry, saved[0], saved[1], batch,
             self.work.solver_table, start, carried, first, k, record,
-            self.clock if clock is None else clock, self.joints,
+            self.clock if clock is None else clock,
         )  # fmt: skip
         return status, done, carried, body, field, need, last_carried
 

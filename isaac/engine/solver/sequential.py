@@ -103,7 +103,7 @@ def solve_sequential(
     rows, prepared for this sub-step (`prepare_joints`); with joints each iteration is the
     contacts' pass, then the joints' (their impulses accumulate in jt). Without joints
     (jt has no rows) the passes run as before, all at once. Both None for a scene without
-    joints: numba prunes the `jt is None` branches on the argument's type before typing, so
+    joints: numba prunes the `jt is None` branches on a None argument's type before typing, so
     that specialisation never compiles or links the joints' kernels (what a scene without
     joints pays at its first run); it computes what an empty joint table does, bit for bit.
 
