@@ -65,7 +65,10 @@ def _exercise() -> None:
     for preset in ("seed", "fast", "balanced", "accurate"):
         for friction, ccd in (("true", "speculative"), ("false", "off")):
             scenes.append(load_scene_text(stack.format(preset=preset, friction=friction, ccd=ccd)))
-    for scene in scenes:
+    # a scene with joints: its driver, solver and the joints' kernels are specialisations of
+    # their own (a scene without joints never compiles them)
+    jointed = load_scene("scenes/car.yaml")
+    for scene in (*scenes, jointed):
         scene = replace(scene, world=replace(scene.world, steps=6))
         sim = Simulation(scene, compile_ahead=False)  # compile here, not load from the cache
         encoder = StepEncoder(sim.model, tuple(float(g) for g in scene.world.gravity))
@@ -74,7 +77,7 @@ def _exercise() -> None:
         for record in sim.run(3):  # the fused driver
             encoder.encode(record)
     # the timed drivers (isaac run --profile), with either solver
-    for scene in scenes[:3]:
+    for scene in (*scenes[:3], jointed):
         scene = replace(scene, world=replace(scene.world, steps=3))
         Simulation(scene, compile_ahead=False, profile=True).advance(3)
     # the finiteness check the recorder's stats fall back on (on a record of the run: every

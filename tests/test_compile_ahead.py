@@ -1,6 +1,7 @@
-"""First run with an empty numba cache (isaac.engine.compile_ahead): the solver and the joints'
-kernels are compiled by two helper processes into the cache, this process loads them from there,
-and the run's bits do not change."""
+"""First run with an empty numba cache (isaac.engine.compile_ahead): the solver (and, for a scene
+with joints, the joints' kernels) are compiled by helper processes into the cache, this process
+loads them from there, and the run's bits do not change. A scene without joints never compiles
+the joints' kernels: its driver and solver are specialisations without them."""
 
 from __future__ import annotations
 
@@ -15,6 +16,7 @@ from isaac.engine.compile_ahead import is_cold, solver_kernel
 from isaac.engine.diagnostics import state_hash
 from isaac.engine.simulation import Simulation
 from isaac.engine.step import StepSettings
+from isaac.scene import load_scene
 
 _FIRST_RUN = r"""
 import json, sys
@@ -22,9 +24,10 @@ sys.path.insert(0, {tests!r})
 from isaac.engine.compile_ahead import WAITING, is_cold, joints_kernel, solver_kernel
 from isaac.engine.diagnostics import state_hash
 from isaac.engine.simulation import Simulation
+from isaac.scene import load_scene
 from test_determinism import pile_scene
 
-scene = pile_scene("balanced")
+scene = pile_scene("balanced") if {scene!r} is None else load_scene({scene!r})
 sim = Simulation(scene)
 kernel = solver_kernel(sim.settings)
 cold_after_build = is_cold(kernel)
@@ -40,12 +43,13 @@ print(json.dumps({{"cold_after_build": cold_after_build, "hashes": hashes,
 """
 
 
-def _first_run(tmp_path) -> dict:
-    """The balanced pile run in a fresh process with an empty numba cache."""
+def _first_run(tmp_path, scene: str | None = None) -> dict:
+    """The balanced pile (or the scene file `scene`) run in a fresh process with an empty numba
+    cache."""
     tests = os.path.dirname(os.path.abspath(__file__))
     env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "numba-cache")}
     proc = subprocess.run(
-        [sys.executable, "-c", _FIRST_RUN.format(tests=tests)],
+        [sys.executable, "-c", _FIRST_RUN.format(tests=tests, scene=scene)],
         capture_output=True,
         text=True,
         env=env,
@@ -56,16 +60,32 @@ def _first_run(tmp_path) -> dict:
     return json.loads(proc.stdout.strip().splitlines()[-1])
 
 
-def test_a_cold_cache_gets_the_solver_and_joints_from_the_helpers_and_the_same_bits(tmp_path):
+def test_a_cold_cache_gets_the_solver_from_its_helper_never_the_joints_and_the_same_bits(tmp_path):
     # one first run (~8 s of compiling on 2 cores): the path every new machine and CI takes
     got = _first_run(tmp_path)
     assert got["cold_after_build"] is False  # the helper wrote the solver's cache index
     # the first step loaded the solver from that cache instead of compiling it
     assert (got["solver_cache_hits"], got["solver_cache_misses"]) == (1, 0)
-    # the joints' helper ran beside the build, and the driver's compile loaded its kernels
-    assert (got["joints_helper"], got["waiting_after_run"]) == (1, 0)
-    assert (got["joints_cache_hits"], got["joints_cache_misses"]) == (1, 0)
+    # no joints: no joints' helper, and neither it nor the driver compiled the joints' kernels
+    assert (got["joints_helper"], got["waiting_after_run"]) == (0, 0)
+    assert (got["joints_cache_hits"], got["joints_cache_misses"]) == (0, 0)
     expected = [state_hash(rec) for rec in Simulation(pile_scene("balanced")).run()]
+    assert got["hashes"] == expected
+
+
+def test_a_cold_cache_gets_a_joint_scenes_solver_and_joints_from_the_helpers_and_the_same_bits(
+    tmp_path,
+):
+    scene = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "scenes")
+    scene = os.path.join(scene, "pendulum.yaml")
+    got = _first_run(tmp_path, scene)
+    assert got["cold_after_build"] is False
+    # the solver's specialisation with joints came from its helper
+    assert (got["solver_cache_hits"], got["solver_cache_misses"]) == (1, 0)
+    # (the simulation compiled the joints' first kernels itself, for its step-0 joint rows,
+    # before `prepare`: no joints' helper then, as before)
+    assert got["waiting_after_run"] == 0
+    expected = [state_hash(rec) for rec in Simulation(load_scene(scene)).run()]
     assert got["hashes"] == expected
 
 

@@ -95,20 +95,23 @@ def joints_kernel():
     return prepare_joints
 
 
-def prepare(settings, world) -> None:
+def prepare(settings, world, joints: bool = False) -> None:
     """Before the first step of a simulation with these StepSettings and WorldSettings: if the
     solver is not in numba's cache, compile it in a helper process while this one compiles the
-    other stages (see the module docstring); and if the joints' kernels are not in it either,
-    compile them in a second helper, which `finish` waits for before the driver's first call."""
-    if not is_cold(solver_kernel(settings)):
+    other stages (see the module docstring); and for a scene with joints (`joints`) whose
+    joints' kernels are not in it either, compile them in a second helper, which `finish` waits
+    for before the driver's first call. A scene without joints never compiles them: its driver
+    and solver are specialisations without the joints' code (`isaac.engine.driver`)."""
+    jointed_cold = joints and is_cold(joints_kernel())
+    if not is_cold(solver_kernel(settings)) and not jointed_cold:
         return
     import subprocess  # (only with a cold cache: 6 ms of every start-up otherwise)
 
-    if is_cold(joints_kernel()) and not WAITING:
+    if jointed_cold and not WAITING:
         joints_helper = _start_helper(world, "joints")
         if joints_helper is not None:
             WAITING.append(joints_helper)
-    helper = _start_helper(world)
+    helper = _start_helper(world, "solver-joints" if joints else "solver")
     if helper is None:
         return
     try:
@@ -120,12 +123,34 @@ def prepare(settings, world) -> None:
             small.model, small.settings, small.dt, small.state, small.work, small.cache, solve=False
         )
         diverged_body(small.state)
+        _compile_driver_helpers(small)
         helper.wait(timeout=HELPER_TIMEOUT_S)
     except BaseException as exc:  # Ctrl-C, a failure here, a stuck helper: no orphan left
         helper.kill()
         helper.wait()
         if not isinstance(exc, subprocess.TimeoutExpired):
             raise
+
+
+def _compile_driver_helpers(small) -> None:
+    """The driver's own small kernels (`isaac.engine.driver`: undo copies, carried contacts,
+    existence, batch rows), on the bundles a `Stepper` of the small world passes, so that
+    the driver's compile, which runs on one core after the helper is done, loads them from the
+    cache instead of compiling them (this process finishes its stages before the solver's
+    helper: the time is free)."""
+    from isaac.engine import driver
+
+    model, state = small.model, small.state
+    stepper = driver.Stepper(model, small.settings, small.dt, small.work)
+    pose = (state.position, state.angle, state.velocity, state.angular_velocity, state.exists)
+    saved = tuple(a.copy() for a in pose)
+    driver._copy_pose(pose, saved)
+    driver._copy_carry(stepper.carry, stepper.saved_carry, 0)
+    driver.carry_over(stepper.scratch, 0, model.n_bodies, stepper.carry)
+    batch = stepper.new_batch(1)
+    driver.keep_rows(batch, 0, stepper.scratch, 0, 0)
+    driver._keep_state(batch, 0, saved, 0)
+    driver._set_existence(model.enters_at, model.leaves_at, saved[4], 0.0)
 
 
 def finish() -> None:
@@ -180,12 +205,13 @@ def _start_helper(world, what: str = "solver") -> subprocess.Popen | None:
     return proc
 
 
-def _compile_solver(world) -> None:
+def _compile_solver(world, joint: bool = False) -> None:
     """The helper's work: one call of the solver stage, on no contact rows (it compiles all the
-    same, and numba writes it to the cache)."""
+    same, and numba writes it to the cache); joint: the specialisation with joints, on a box
+    hanging by a joint (without: the one a scene without joints calls)."""
     from isaac.engine.step import resolve
 
-    small = _SmallWorld(world)
+    small = _SmallWorld(world, joint=joint)
     resolve(small.model, small.settings, small.state, small.work, small.cache, 0)
 
 
@@ -216,4 +242,8 @@ def _compile_joints(world) -> None:
 
 if __name__ == "__main__":
     what = sys.argv[1] if len(sys.argv) > 1 else "solver"
-    (_compile_joints if what == "joints" else _compile_solver)(pickle.load(sys.stdin.buffer))
+    world = pickle.load(sys.stdin.buffer)
+    if what == "joints":
+        _compile_joints(world)
+    else:
+        _compile_solver(world, joint=what == "solver-joints")

@@ -5,7 +5,10 @@ each: geometry, broad phase, narrow phase, push-out, impulses, integration; exis
 at their times; the divergence check after each step). They call the same stage kernels, in
 the same order, as `isaac.engine.step.substep`, so every path gives the same bits. Two drivers,
 one per solver, so that a run compiles only the solver it uses (numba types every branch of a
-function, and the sequential solver is most of the compile time).
+function, and the sequential solver is most of the compile time); and `run_steps_sequential_joints`
+for a scene with joints, so that every other scene's driver never types, compiles or links the
+joints' kernels (nor the solver's joint passes: `solve_sequential` on joints None), a third of
+the driver's code and its first compile (the default scene's first run: bench/README.md).
 
 Arguments are named bundles of arrays (`Bodies`, `Pose`, `Scratch`, `Carry`, `Settings`,
 `Batch`), crossed into compiled code once per call: their cost is paid per batch of steps,
@@ -378,12 +381,13 @@ def _copy_carry(carry, into, count):
 
 @numba.njit(cache=True, nogil=True, inline="always")
 def _run_steps(
-    seed, timed, bodies, cfg, pose, work, carry, saved_pose, saved_carry, batch, table, start,
-    carried, first, k, record, clock,
+    seed, timed, jointed, bodies, cfg, pose, work, carry, saved_pose, saved_carry, batch, table,
+    start, carried, first, k, record, clock,
 ):  # fmt: skip
-    """The body of every driver (inlined into each, so that the constants `seed` and `timed`
-    prune the solver a driver does not use, and the clock reads of an untimed one, before
-    numba compiles it). The sub-step is `isaac.engine.step.substep`'s, stage for stage."""
+    """The body of every driver (inlined into each, so that the constants `seed`, `timed` and
+    `jointed` prune the solver a driver does not use, the clock reads of an untimed one and the
+    joints' kernels of a scene without joints, before numba compiles it). The sub-step is
+    `isaac.engine.step.substep`'s, stage for stage."""
     began = monotonic_ns() if timed else 0
     lap = began
     # every array a stage takes is named here, once a call, never inside the loop (a bundle's
@@ -405,7 +409,7 @@ def _run_steps(
     joint_waves = Joints(*joint_wave_fields)
     gravity_dv = cfg.gravity_dv
     n = position.shape[0]
-    n_joints = joint_scratch.shape[0]
+    n_joints = joint_scratch.shape[0]  # (0 whenever not `jointed`)
     no_error = np.empty((0, 2))  # what a sub-step whose joint errors are not logged gets
     at = Batch(*batch).offsets[start] if record else 0
     last_carried = carried
@@ -470,7 +474,7 @@ def _run_steps(
             # joints
             if not cfg.explicit:
                 add_gravity(velocity, movable, exists, cfg.gx, cfg.gy, cfg.h)
-            if n_joints:
+            if jointed and n_joints:
                 prepare_joints(
                     joints, joint_scratch, position, angle, exists, inv_mass, inv_inertia, cfg.h,
                     joint_carry, cfg.warm_starting,
@@ -483,16 +487,29 @@ def _run_steps(
                     cfg.restitution_threshold, cfg.friction_on, cfg.h, c_impulse, c_tangent,
                     c_restitution, push_a, push_b,
                 )  # fmt: skip
-            elif not seed and (rows > 0 or n_joints > 0):
+            elif not seed:
                 # (the previous impulses whole: rows name their previous row by index)
-                need = solve_sequential(
-                    rows, c_a, c_b, c_feature, c_slot, c_point, c_normal, c_depth, c_previous,
-                    position, velocity, angular_velocity, inv_mass, inv_inertia, gravity_dv,
-                    restitution, friction, cfg.restitution_rule, cfg.friction_rule,
-                    cfg.restitution_threshold, cfg.friction_on, cfg.iterations,
-                    cfg.warm_starting, cfg.h, prev_impulse, prev_tangent, c_impulse, c_tangent,
-                    c_restitution, push_a, push_b, table, joint_fields, joint_scratch,
-                )  # fmt: skip
+                if jointed:
+                    if rows > 0 or n_joints > 0:
+                        need = solve_sequential(
+                            rows, c_a, c_b, c_feature, c_slot, c_point, c_normal, c_depth,
+                            c_previous, position, velocity, angular_velocity, inv_mass,
+                            inv_inertia, gravity_dv, restitution, friction, cfg.restitution_rule,
+                            cfg.friction_rule, cfg.restitution_threshold, cfg.friction_on,
+                            cfg.iterations, cfg.warm_starting, cfg.h, prev_impulse, prev_tangent,
+                            c_impulse, c_tangent, c_restitution, push_a, push_b, table,
+                            joint_fields, joint_scratch,
+                        )  # fmt: skip
+                elif rows > 0:
+                    # the solver's specialisation without the joints' code (solve_sequential)
+                    need = solve_sequential(
+                        rows, c_a, c_b, c_feature, c_slot, c_point, c_normal, c_depth, c_previous,
+                        position, velocity, angular_velocity, inv_mass, inv_inertia, gravity_dv,
+                        restitution, friction, cfg.restitution_rule, cfg.friction_rule,
+                        cfg.restitution_threshold, cfg.friction_on, cfg.iterations,
+                        cfg.warm_starting, cfg.h, prev_impulse, prev_tangent, c_impulse,
+                        c_tangent, c_restitution, push_a, push_b, table, None, None,
+                    )  # fmt: skip
                 if need > 0:
                     status = NEED_TABLE
                     break
@@ -503,7 +520,7 @@ def _run_steps(
             advance_positions(position, angle, velocity, angular_velocity, movable, exists, cfg.h)
             if cfg.explicit:
                 add_gravity(velocity, movable, exists, cfg.gx, cfg.gy, cfg.h)
-            if n_joints:
+            if jointed and n_joints:
                 # the errors are computed only where they are logged: a recorded step's last
                 # sub-step (`Stepper.redo_last` takes `advance`'s last step again to record it)
                 logged = record and index == cfg.substeps - 1
@@ -515,7 +532,7 @@ def _run_steps(
                 lap = _lap(clock, INTEGRATION, lap)
             # this sub-step's contacts are what the next one reads
             carried = carry_over(work, rows, n, carry)
-            if n_joints:
+            if jointed and n_joints:
                 keep_joint_impulses(joint_scratch, joint_carry)
             if record:
                 end = keep_rows(batch, at, work, rows, index)
@@ -547,7 +564,7 @@ def _run_steps(
             return status, s, step_carried, body, field, need, step_carried
         if record:
             _keep_state(batch, start + s, pose, at)
-            if n_joints:
+            if jointed and n_joints:
                 _keep_joints(batch, start + s, joints, pose, joint_scratch, joint_error)
         last_carried = step_carried
         if timed:
@@ -568,15 +585,17 @@ def run_steps_sequential(
     Every bundle arrives as a plain tuple of its fields (`Bodies`, `Settings`, `Pose`, `Scratch`,
     `Carry`, `Pose` and `Carry` of the same sizes for undoing a step, `Batch`); table: the
     solver's scratch (`isaac.engine.solver.sequential`); carried: how many Carry rows are
-    valid; clock: (1 + len(STAGES),) int64, which only the timed drivers write. Returns (status,
+    valid; clock: (1 + len(STAGES),) int64, which only the timed drivers write. A scene
+    without joints only (`run_steps_sequential_joints` otherwise): this driver never types,
+    compiles or links the joints' kernels nor the solver's joint passes. Returns (status,
     steps taken, carried, body, field, pairs, rows or scratch entries needed, carried at the
     start of the last step): status DONE, or DIVERGED / NEED_PAIRS / NEED_ROWS / NEED_TABLE
     with the step that did it undone (body, field:
     `first_diverged`'s). On return `saved_pose` / `saved_carry` hold the start of the last step
     taken (or undone), which `Stepper.redo_last` computes again to record it."""
     return _run_steps(
-        False, False, bodies, Settings(*cfg), pose, work, carry, saved_pose, saved_carry, batch,
-        table, start, carried, first, k, record, clock,
+        False, False, False, bodies, Settings(*cfg), pose, work, carry, saved_pose,
+        saved_carry, batch, table, start, carried, first, k, record, clock,
     )  # fmt: skip
 
 
@@ -587,8 +606,8 @@ def run_steps_seed(
 ):  # fmt: skip
     """`run_steps_sequential` with the seed's single-pass solver."""
     return _run_steps(
-        True, False, bodies, Settings(*cfg), pose, work, carry, saved_pose, saved_carry, batch,
-        table, start, carried, first, k, record, clock,
+        True, False, False, bodies, Settings(*cfg), pose, work, carry, saved_pose,
+        saved_carry, batch, table, start, carried, first, k, record, clock,
     )  # fmt: skip
 
 
@@ -600,8 +619,8 @@ def run_steps_sequential_timed(
     """`run_steps_sequential` that also adds each stage's time to `clock` (ns: clock[0] the
     whole call, clock[1 + i] stage STAGES[i]); the same bits."""
     return _run_steps(
-        False, True, bodies, Settings(*cfg), pose, work, carry, saved_pose, saved_carry, batch,
-        table, start, carried, first, k, record, clock,
+        False, True, False, bodies, Settings(*cfg), pose, work, carry, saved_pose,
+        saved_carry, batch, table, start, carried, first, k, record, clock,
     )  # fmt: skip
 
 
@@ -613,8 +632,34 @@ def run_steps_seed_timed(
     """`run_steps_seed` that also adds each stage's time to `clock`, as
     `run_steps_sequential_timed` does."""
     return _run_steps(
-        True, True, bodies, Settings(*cfg), pose, work, carry, saved_pose, saved_carry, batch,
-        table, start, carried, first, k, record, clock,
+        True, True, False, bodies, Settings(*cfg), pose, work, carry, saved_pose,
+        saved_carry, batch, table, start, carried, first, k, record, clock,
+    )  # fmt: skip
+
+
+@numba.njit(cache=True, nogil=True)
+def run_steps_sequential_joints(
+    bodies, cfg, pose, work, carry, saved_pose, saved_carry, batch, table, start, carried, first,
+    k, record, clock,
+):  # fmt: skip
+    """`run_steps_sequential` for a scene with joints: the joints' kernels and the solver's
+    joint passes (the seed's solver has no joint rows: a scene with joints cannot choose it)."""
+    return _run_steps(
+        False, False, True, bodies, Settings(*cfg), pose, work, carry, saved_pose, saved_carry,
+        batch, table, start, carried, first, k, record, clock,
+    )  # fmt: skip
+
+
+@numba.njit(cache=True, nogil=True)
+def run_steps_sequential_joints_timed(
+    bodies, cfg, pose, work, carry, saved_pose, saved_carry, batch, table, start, carried, first,
+    k, record, clock,
+):  # fmt: skip
+    """`run_steps_sequential_joints` that also adds each stage's time to `clock`, as
+    `run_steps_sequential_timed` does."""
+    return _run_steps(
+        False, True, True, bodies, Settings(*cfg), pose, work, carry, saved_pose, saved_carry,
+        batch, table, start, carried, first, k, record, clock,
     )  # fmt: skip
 
 
@@ -665,7 +710,16 @@ class Stepper:
                 bool(model.filtered),
             )
         )  # fmt: skip
-        if timed:
+        jointed = model.joints.kind.shape[0] > 0
+        if s.seed_solver and jointed:
+            raise ValueError(
+                "the seed's solver has no joint rows: a scene with joints cannot use it"
+            )
+        if jointed:  # (a driver without the joints' code for every other scene)
+            self.kernel = (
+                run_steps_sequential_joints_timed if timed else run_steps_sequential_joints
+            )
+        elif timed:
             self.kernel = run_steps_seed_timed if s.seed_solver else run_steps_sequential_timed
         else:
             self.kernel = run_steps_seed if s.seed_solver else run_steps_sequential

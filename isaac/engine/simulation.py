@@ -84,7 +84,7 @@ class Simulation:
         if start is not None:
             self.resume(start)
         if compile_ahead:
-            _ahead.prepare(self.settings, scene.world)
+            _ahead.prepare(self.settings, scene.world, joints=bool(self.model.joints.kind.shape[0]))
 
     def resume(self, record: StepRecord) -> None:
         """Continue from a record of this scene (a logged keyframe), keeping the model.

@@ -160,8 +160,9 @@ def solve_contacts(
             c_push_a,
             c_push_b,
             table,
-            joints,
-            joint_scratch,
+            # (None without joints: the solver's specialisation without the joints' code)
+            joints if joint_scratch.shape[0] else None,
+            joint_scratch if joint_scratch.shape[0] else None,
         )
         if need == 0:
             return table

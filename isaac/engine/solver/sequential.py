@@ -102,7 +102,10 @@ def solve_sequential(
     joints, jt: the joint table (`isaac.engine.joints.Joints`, a plain tuple) and its scratch
     rows, prepared for this sub-step (`prepare_joints`); with joints each iteration is the
     contacts' pass, then the joints' (their impulses accumulate in jt). Without joints
-    (jt has no rows) the passes run as before, all at once.
+    (jt has no rows) the passes run as before, all at once. Both None for a scene without
+    joints: numba prunes the `jt is None` branches on a None argument's type before typing, so
+    that specialisation never compiles or links the joints' kernels (what a scene without
+    joints pays at its first run); it computes what an empty joint table does, bit for bit.
 
     table: (m,) float64 scratch, kept by the caller (see above); the solver allocates nothing.
     Returns 0 when it solved, or, when `table` is too small, the size it needs (at least; the
@@ -115,14 +118,16 @@ def solve_sequential(
     c_impulse / c_tangent. (Several small kernels rather than one: numba compiles them in a
     fraction of the time. _nrt=False: no reference counts, as the driver's stage kernels.)
     """
-    n_joints = jt.shape[0]
+    if jt is None:  # (pruned on the argument's type: see the docstring)
+        n_joints = 0
+    else:
+        n_joints = jt.shape[0]
     if rows == 0 and n_joints == 0:  # nothing to solve: the velocities stay as they are
         return 0
     n = velocity.shape[0]
     fixed_size = _fixed_part(rows, n)
     if table.shape[0] < fixed_size:  # (a first guess at the groups; a retry may ask more)
         return fixed_size + _group_part(rows // LANES + 1)
-    J = Joints(*joints)
     v = table[: 3 * n].reshape((n, 3))  # the velocities (vx, vy, w), packed per body
     inv = table[3 * n : 5 * n].reshape((n, 2))  # and the inverse masses
     bounce_back = table[5 * n : 5 * n + rows]  # (1 + e u_b / u) g of rows that bounce (m)
@@ -208,16 +213,20 @@ def solve_sequential(
             v[b, 0] += px * inv[b, 0]
             v[b, 1] += py * inv[b, 0]
             v[b, 2] += warm[k, 3] * inv[b, 1]
-    if n_joints and warm_starting:
-        warm_start_joints(J, jt, v, inv)
+    if jt is not None:
+        if n_joints and warm_starting:
+            warm_start_joints(Joints(*joints), jt, v, inv)
     # the velocities into each moving body's first unit and every unit side with a concrete body
     _to_first_units(t, first, v)
     for f in range(n_fixed):
         _put_velocity(t, fixed[f], v, fixed_body[f])
 
-    if n_joints == 0:
+    if jt is None:
+        run_passes(t, kind, successor, groups, iterations)
+    elif n_joints == 0:
         run_passes(t, kind, successor, groups, iterations)
     else:
+        J = Joints(*joints)
         # after each pass the velocities are back in each body's first unit (its successor);
         # handed between the units and v for the bodies that have a unit alone (`units`), not
         # for every body each iteration (the 100 x 100 joint grid has 10,000 bodies, no contact)
