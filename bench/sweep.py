@@ -399,7 +399,13 @@ def markdown(result: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
-def run_subprocess(env: dict | None = None, reps: int = 3, timeout: float = 1800.0) -> dict:
+# This machine's speed drifts by up to 40 % within a second (a fixed loop in one process: 0.14 to
+# 0.20 s, three times in a row) and a 1,000-run bounce sweep lasts about one: with 3 repetitions
+# the median speed-up of one pass was 1.59, of the next (9 repetitions) 1.86, on the same main.
+REPS = 9
+
+
+def run_subprocess(env: dict | None = None, reps: int = REPS, timeout: float = 1800.0) -> dict:
     """`measure` in a process of its own (what bench.suite runs): the result, or
     {"kind": "sweep", "error": ...}."""
     cmd = [sys.executable, "-m", "bench.sweep", "--json", "--reps", str(reps)]
@@ -417,7 +423,7 @@ def run_subprocess(env: dict | None = None, reps: int = 3, timeout: float = 1800
 
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="python -m bench.sweep", description=__doc__.split("\n")[0])
-    p.add_argument("--reps", type=int, default=3, help="repetitions (default: %(default)s)")
+    p.add_argument("--reps", type=int, default=REPS, help="repetitions (default: %(default)s)")
     p.add_argument(
         "--scale", type=float, default=1.0, help="fraction of the runs (a quick look: 0.1)"
     )
