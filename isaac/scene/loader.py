@@ -865,7 +865,7 @@ def load_scene_text(text: str, source: str = "<text>", *, default_name: str | No
                 source=source,
                 line=1,
             )
-        return _read_scene(Reader(source), root, default_name or "scene")
+        return read_scene_tree(root, source, default_name=default_name)
     except RecursionError:
         raise SceneError("the document is nested too deeply", source=source) from None
     finally:
