@@ -32,6 +32,7 @@ import json
 import math
 import os
 import platform
+import re
 import statistics
 import subprocess
 import sys
@@ -563,13 +564,16 @@ def markdown(meta, rows, growth_rows, startup_rows, recs, targets) -> str:
 
 
 def update_readme(text: str, path: Path) -> bool:
+    """Put `text` between the marker lines of `path` (each marker alone on its line: the prose
+    that names them is left alone); False, and nothing written, without both of them."""
     if not path.exists():
         return False
     readme = path.read_text()
-    if README_START not in readme or README_END not in readme:
+    start = re.search(rf"^{re.escape(README_START)}$", readme, re.M)
+    end = start and re.search(rf"^{re.escape(README_END)}$", readme[start.end() :], re.M)
+    if not end:
         return False
-    head, rest = readme.split(README_START, 1)
-    _, tail = rest.split(README_END, 1)
+    head, tail = readme[: start.start()], readme[start.end() + end.end() :]
     path.write_text(f"{head}{README_START}\n{text}\n{README_END}{tail}")
     return True
 

@@ -189,3 +189,18 @@ def test_bench_scenes_build_the_same_bodies_twice(name):
     assert a.scene.bodies == b.scene.bodies
     assert a.scene.world.dt == pytest.approx(DT)
     assert all(3 <= len(body.vertices) <= 8 for body in a.scene.bodies)  # Box2D's limit here
+
+
+def test_the_bench_tables_go_between_the_marker_lines_not_into_prose_that_names_them(tmp_path):
+    from bench.suite import README_END, README_START, update_readme
+
+    prose = f"The tables go between `{README_START}` and `{README_END}` below.\n"
+    path = tmp_path / "README.md"
+    path.write_text(f"# Bench\n{prose}\n## Latest\n{README_START}\nold\n{README_END}\nafter\n")
+    assert update_readme("| new |", path)
+    assert path.read_text() == (
+        f"# Bench\n{prose}\n## Latest\n{README_START}\n| new |\n{README_END}\nafter\n"
+    )
+    path.write_text(prose)  # the markers only in prose: nothing written
+    assert not update_readme("| new |", path)
+    assert path.read_text() == prose
