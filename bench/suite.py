@@ -75,6 +75,10 @@ REPLAY_TARGET = 1.2
 
 # how an ISAAC row steps (bench.peers.isaac_engine): one row per mode asked for
 ISAAC_MODES = ("step", "run", "advance")
+# the scenes the fused-stepping issue judges through `run` and `advance` (MODE_TARGETS and the
+# 0.7x ratios): a run that leaves --isaac-modes at `step` times them through those paths too
+FUSED_SCENES = ("head-on", "bounce", "off-centre", "pile-100", "pyramid-10")
+FUSED_MODES = ("run", "advance")
 
 
 def log(msg: str) -> None:
@@ -90,6 +94,16 @@ def subprocess_env(**extra: str) -> dict[str, str]:
     env["PYTHONPATH"] = str(ROOT) + os.pathsep + env.get("PYTHONPATH", "")
     env.update(extra)
     return env
+
+
+def fused_engines(engines: list[str], modes: list[str]) -> list[str]:
+    """The `run` and `advance` rows of each ISAAC preset in `engines`, timed on FUSED_SCENES
+    only, when the run asked for `step` rows alone (the default): the fused-stepping targets
+    are then judged in every full run, at the cost of the small scenes alone."""
+    if modes != ["step"]:
+        return []
+    presets = [e for e in engines if e.startswith("isaac") and "/" not in e]
+    return [f"{e}/{m}" for e in presets for m in FUSED_MODES]
 
 
 def run_worker(scene: str, engine: str, timeout: float) -> dict:
@@ -350,6 +364,30 @@ def check_targets(rows, growth_rows, startup_rows, isaac_engines, recordings=())
                     met=None if value is None else bool(value <= limit),
                 )
             )
+            if what == "ratio" and scene in FUSED_SCENES:
+                # the same limit through the fused paths, where they were timed
+                for mode in FUSED_MODES:
+                    row = next(
+                        (
+                            r
+                            for r in rows
+                            if r.get("engine_arg") == f"{engine}/{mode}" and r["scene"] == scene
+                        ),
+                        None,
+                    )
+                    if row is None:
+                        continue
+                    value = row.get("ratio_to_pymunk")
+                    out.append(
+                        dict(
+                            kind="target",
+                            engine=f"{engine}/{mode}",
+                            what=f"ms/step {engine}/{mode}/pymunk, {scene}",
+                            limit=limit,
+                            value=value,
+                            met=None if value is None else bool(value <= limit),
+                        )
+                    )
         for mode, scene, limit in MODE_TARGETS:
             row = next(
                 (
@@ -698,13 +736,15 @@ def main(argv: list[str] | None = None) -> int:
     if BASELINE not in engines:
         log("bench: pymunk not in the run: no ratios")
 
+    fused = fused_engines(engines, modes)
     t_start = time.perf_counter()
     runs: list[dict] = []
     for scene in scenes:
         # the 10,000 pile: fewer repetitions keep the whole run near 15 minutes
         scene_reps = min(reps, 3) if scene == "pile-10000" else reps
+        scene_engines = engines + (fused if scene in FUSED_SCENES else [])
         for rep in range(scene_reps):
-            for engine in engines:
+            for engine in scene_engines:
                 r = run_worker(scene, engine, args.timeout)
                 r.update(kind="run", rep=rep, engine_arg=engine)
                 runs.append(r)
@@ -713,7 +753,7 @@ def main(argv: list[str] | None = None) -> int:
                     f"  {scene:12s} rep {rep} {engine:15s} "
                     + (f"{ms:9.4f} ms/step" if ms is not None else f"error: {r['error']}")
                 )
-    rows = aggregate(runs, scenes, engines)
+    rows = aggregate(runs, scenes, engines + fused)
     growth_rows = growth(rows)
 
     # start-up, recording and the targets are measured on the step-by-step rows

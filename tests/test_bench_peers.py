@@ -204,3 +204,32 @@ def test_the_bench_tables_go_between_the_marker_lines_not_into_prose_that_names_
     path.write_text(prose)  # the markers only in prose: nothing written
     assert not update_readme("| new |", path)
     assert path.read_text() == prose
+
+
+def test_a_step_only_run_also_times_the_fused_paths_of_each_preset_and_no_others():
+    from bench.suite import fused_engines
+
+    engines = ["pymunk", "isaac-fast", "isaac-balanced"]
+    assert fused_engines(engines, ["step"]) == [
+        "isaac-fast/run",
+        "isaac-fast/advance",
+        "isaac-balanced/run",
+        "isaac-balanced/advance",
+    ]
+    assert fused_engines(engines, ["step", "advance"]) == []  # asked for: timed everywhere
+
+
+def test_the_small_scene_ratio_targets_are_judged_on_every_path_timed():
+    from bench.suite import check_targets
+
+    def row(engine, ratio):
+        return dict(kind="row", scene="pile-100", engine_arg=engine, ratio_to_pymunk=ratio)
+
+    rows = [row("isaac-balanced", 0.9), row("isaac-balanced/advance", 0.6)]
+    pile = {
+        t["engine"]: t["met"]
+        for t in check_targets(rows, [], [], ["isaac-balanced"])
+        if t["what"].endswith("pile-100")
+    }
+    # the step row misses 0.7, advance meets it, run was not timed: no line
+    assert pile == {"isaac-balanced": False, "isaac-balanced/advance": True}
