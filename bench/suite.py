@@ -328,6 +328,19 @@ def recording(preset: str, reps: int, steps: int, scene: str) -> dict:
 # ---- targets --------------------------------------------------------------------------------
 
 
+def _mode_target(rows, engine, mode, scene, limit, over) -> list[dict]:
+    """The target line of row `engine`/`mode` on `scene` against `limit`, or none when that
+    mode or scene was not run."""
+    name = f"{engine}/{mode}"
+    row = next((r for r in rows if r.get("engine_arg") == name and r["scene"] == scene), None)
+    if row is None:
+        return []
+    value = row.get("ratio_to_pymunk")
+    met = None if value is None else bool(value <= limit)
+    what = f"ms/step {name}{over}, {scene}"
+    return [dict(kind="target", engine=name, what=what, limit=limit, value=value, met=met)]
+
+
 def check_targets(rows, growth_rows, startup_rows, isaac_engines, recordings=()) -> list[dict]:
     out = []
     for engine in isaac_engines:
@@ -367,49 +380,9 @@ def check_targets(rows, growth_rows, startup_rows, isaac_engines, recordings=())
             if what == "ratio" and scene in FUSED_SCENES:
                 # the same limit through the fused paths, where they were timed
                 for mode in FUSED_MODES:
-                    row = next(
-                        (
-                            r
-                            for r in rows
-                            if r.get("engine_arg") == f"{engine}/{mode}" and r["scene"] == scene
-                        ),
-                        None,
-                    )
-                    if row is None:
-                        continue
-                    value = row.get("ratio_to_pymunk")
-                    out.append(
-                        dict(
-                            kind="target",
-                            engine=f"{engine}/{mode}",
-                            what=f"ms/step {engine}/{mode}/pymunk, {scene}",
-                            limit=limit,
-                            value=value,
-                            met=None if value is None else bool(value <= limit),
-                        )
-                    )
+                    out += _mode_target(rows, engine, mode, scene, limit, "/pymunk")
         for mode, scene, limit in MODE_TARGETS:
-            row = next(
-                (
-                    r
-                    for r in rows
-                    if r.get("engine_arg") == f"{engine}/{mode}" and r["scene"] == scene
-                ),
-                None,
-            )
-            if row is None:  # that mode or scene was not run
-                continue
-            value = row.get("ratio_to_pymunk")
-            out.append(
-                dict(
-                    kind="target",
-                    engine=f"{engine}/{mode}",
-                    what=f"ms/step {engine}/{mode} over pymunk, {scene}",
-                    limit=limit,
-                    value=value,
-                    met=None if value is None else bool(value <= limit),
-                )
-            )
+            out += _mode_target(rows, engine, mode, scene, limit, " over pymunk")
     for rec in recordings:
         if "error" in rec:
             continue
