@@ -111,8 +111,7 @@ class Sweep:
         return {axis.key: plain for axis, _, plain in self.draws(index)}
 
     def run_scene_text(self, index: int) -> str:
-        values = {(id(a.slot.container), a.slot.key): node for a, node, _ in self.draws(index)}
-        return keys.emit(self.root, values)
+        return keys.emit(self.root, _swapped(self.draws(index)))
 
     def load_run(self, index: int, draws=None):
         """Run `index`'s Scene (`draws`: its `draws(index)`, when known), or the SceneError of
@@ -137,9 +136,10 @@ class Sweep:
                 finally:
                     for put_back in reversed(undo):
                         put_back()
-        values = {(id(a.slot.container), a.slot.key): node for a, node, _ in draws}
         return load_scene_text(
-            keys.emit(self.root, values), source=self.scene_path, default_name=self.scene_name
+            keys.emit(self.root, _swapped(draws)),
+            source=self.scene_path,
+            default_name=self.scene_name,
         )
 
     def _value_lines(self):
@@ -148,8 +148,7 @@ class Sweep:
         refused by the YAML composer, whose node counts every run of scalar values shares)."""
         if self.value_lines is None:
             draws = self.draws(0)
-            values = {(id(a.slot.container), a.slot.key): node for a, node, _ in draws}
-            text, where = keys.emit_lines(self.root, values)
+            text, where = keys.emit_lines(self.root, _swapped(draws))
             room = sum(len(a.key) + 64 + _longest_value(a) for a in self.axes)
             try:
                 compose(text, self.scene_path)
@@ -159,6 +158,12 @@ class Sweep:
             keyed = [(id(a.slot.container), a.slot.key) for a, _, _ in draws]
             self.value_lines = [where[k] for k in keyed] if ok else False
         return self.value_lines
+
+
+def _swapped(draws) -> dict:
+    """{(id(container), key): value node} of a run's `draws`, in the axes' order: what
+    `keys.emit` puts in place of the base scene's nodes."""
+    return {(id(a.slot.container), a.slot.key): node for a, node, _ in draws}
 
 
 _TREE_LOCK = threading.Lock()  # `Sweep.load_run` edits the base tree while it reads it
