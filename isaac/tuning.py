@@ -6,11 +6,23 @@ step (a 150 kB MCAP message, a contact array of a large scene) pays for zeroing 
 time. Raising the threshold keeps such buffers in the heap and reuses them: encoding the 500-body
 pile's contacts went from about 100 to 6 microseconds a step. It changes no result, only where
 memory comes from; on a C library without mallopt it does nothing.
+
+one_blas_thread: numpy's OpenBLAS starts a thread per CPU when numpy is imported, and those
+threads spin a while waiting for work that never comes: nothing ISAAC runs calls BLAS with
+matrices big enough to share out (the step is numba kernels; the tools multiply 2 x 2 and
+k x 2 arrays). On the 2-core machine the spinning cost every process that imports numpy
+0.05-0.1 s of CPU, taken from the other process of a recorded run: `isaac run
+scenes/default.yaml --mcap A --rrd B` (three processes' start-ups at once) used 1.23 s of CPU
+and 1.57x the plain run's wall time with the pool, 0.88 s and 1.42x without (2026-12-03,
+paired runs). Dask's workers get the same setting from Dask itself (its nanny's
+``pre-spawn-environ``). It changes no result.
 """
 
 from __future__ import annotations
 
 import ctypes
+import os
+import sys
 
 M_TRIM_THRESHOLD = -1  # glibc malloc.h
 M_MMAP_THRESHOLD = -3
@@ -43,3 +55,11 @@ def reuse_large_buffers() -> bool:
     )
     _done = ok
     return ok
+
+
+def one_blas_thread() -> bool:
+    """Ask for one OpenBLAS thread (``OPENBLAS_NUM_THREADS=1``), in this process if numpy is not
+    imported yet and in every process it starts, unless the user set the variable. Returns
+    whether this process's numpy will start without the pool."""
+    os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+    return "numpy" not in sys.modules

@@ -112,6 +112,9 @@ def _start_python(
     root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
     env = dict(os.environ)
     env["PYTHONPATH"] = os.pathsep.join(p for p in (root, env.get("PYTHONPATH")) if p)
+    # no BLAS thread pool: a writer never calls BLAS, and the pool's start (its threads spin
+    # a while) costs 0.05-0.1 s of CPU beside the run it overlaps (`isaac.tuning`)
+    env.setdefault("OPENBLAS_NUM_THREADS", "1")
     try:
         proc = subprocess.Popen(
             [sys.executable, "-m", module, *map(str, args)],

@@ -134,9 +134,10 @@ def _end_now(status: int) -> None:
 
 
 def _main(argv: list[str] | None, words: list[str]) -> int:
-    from isaac.tuning import reuse_large_buffers
+    from isaac.tuning import one_blas_thread, reuse_large_buffers
 
     reuse_large_buffers()
+    one_blas_thread()  # before numpy is imported, by this command or the processes it starts
     parser = build_parser(words[0] if words else None)
     args = parser.parse_args(argv)
     # whether the command is this process's only job (the `isaac` command itself, not a call
