@@ -49,6 +49,7 @@ from recorder.pack import (
     message_sizes,
     model_bundle,
     pack_messages,
+    read_only,
     put_double,
     row_range,
     step_state,
@@ -534,25 +535,29 @@ class BatchPlan(NamedTuple):
     world_at: np.ndarray  # (steps + 1,) int64: step s's /world record is world[at[s]:at[s + 1]]
 
 
-_NO_BYTES = np.zeros(0, dtype=np.uint8)
+# read-only, as the /world records of a batch (a bytes buffer) are: one compile of the packers
+_NO_BYTES = read_only(np.zeros(0, dtype=np.uint8))
 
 
 @functools.lru_cache(maxsize=8)
 def _no_joints(steps: int) -> tuple:
     """Joint arrays of no joints, in the shapes `pack_records` takes."""
-    pair = np.zeros((steps, 0, 2))
-    one = np.zeros((steps, 0))
-    return (pair, pair, pair, one, one, one, pair, np.zeros((steps, 0, 6)))
+    pair = read_only(np.zeros((steps, 0, 2)))  # read-only, as a batch's joint arrays
+    one = read_only(np.zeros((steps, 0)))
+    return (pair, pair, pair, one, one, one, pair, read_only(np.zeros((steps, 0, 6))))
 
 
 class _OneStep:
     """A `StepRecord` in the shape of a one-step `StepBatch`, as `BatchPacker` reads it (views
-    of the record's arrays, copied only where a dtype or layout differs)."""
+    of the record's arrays, copied only where a dtype or layout differs; read-only, as a
+    batch's arrays are, so that the packers compile once: `recorder.pack.read_only`)."""
 
     def __init__(self, record, dt: float) -> None:
         from isaac.engine.records import CONTACT_FIELDS, JOINT_FIELDS
 
-        c = np.ascontiguousarray
+        def c(a, dtype):
+            return read_only(np.ascontiguousarray(a, dtype=dtype))
+
         self.first = int(record.step)
         self.dt = dt
         self.steps = 1
@@ -562,7 +567,7 @@ class _OneStep:
         self.angular_velocity = c(record.angular_velocity, dtype=np.float64)[None]
         self.exists = c(record.exists, dtype=bool)[None]
         rows = record.contacts
-        self.offsets = np.array([0, len(rows)], dtype=np.int64)
+        self.offsets = c([0, len(rows)], np.int64)
         self.row_arrays = tuple(
             c(getattr(rows, f), dtype=np.int32 if k < 5 else np.float64)
             for k, f in enumerate(CONTACT_FIELDS)

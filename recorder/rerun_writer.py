@@ -34,7 +34,7 @@ from isaac.engine.records import CONTACT_FIELDS, StepRecord
 from isaac.errors import LogError
 from recorder import blueprint
 from recorder.blueprint import STAT_NAMES
-from recorder.pack import batch_state, model_bundle
+from recorder.pack import batch_state, model_bundle, read_only
 from recorder.rerun_batch import (
     AT_JOINTS,
     AT_POINTS,
@@ -106,11 +106,8 @@ def _load_kernels() -> None:
     row = np.zeros((0, 2))
     args = [z1[None], z2[None], np.ones((1, 1), bool), np.zeros(2, np.int64), row, row, z1[:0]]
     args += [row, row]
-    draw_steps(*args, d, out)  # a writer process's frames: writable arrays
-    for a in args:  # a StepBatch's: read-only (numba compiles each kind apart)
-        a.flags.writeable = False
-    out.at[:] = 0
-    draw_steps(*args, d, out)
+    # read-only, as every caller hands them (`recorder.pack.read_only`): one compile
+    draw_steps(*map(read_only, args), d, out)
 
 
 class _RunSummary:
@@ -449,9 +446,12 @@ class RerunLogWriter:
         k = self._count
         self._steps.append(int(step))
         self._times.append(float(time))
-        c = np.ascontiguousarray
+
+        def c(a):  # read-only, as a batch's arrays: the kernel compiles once
+            return read_only(np.ascontiguousarray(a))
+
         draw_steps(
-            c(angle)[None], c(position)[None], c(exists)[None], np.array([0, m], dtype=np.int64),
+            c(angle)[None], c(position)[None], c(exists)[None], c(np.array([0, m], np.int64)),
             c(point), c(normal), c(impulse), c(push_a), c(push_b), self._drawing, self._out,
         )  # fmt: skip
         if stats is not None:
