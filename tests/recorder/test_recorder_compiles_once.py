@@ -16,7 +16,8 @@ import pytest
 
 REPO = Path(__file__).resolve().parents[2]
 
-# a whole recorded run (both files, written by a thread of this process, as `isaac run` does), then each kernel's signatures
+# a whole recorded run (both files, written by a thread of this process, as `isaac run` does),
+# then the number of signatures each kernel compiled or loaded
 _RUN = """
 import json, sys
 from isaac import Simulation, load_scene
