@@ -96,7 +96,8 @@ def _load_kernels() -> None:
     first steps of a run do not wait for them."""
     z1, z2, f2 = np.zeros(1), np.zeros((1, 2)), np.zeros((4, 2), dtype=np.float32)
     one = np.ones(1, dtype=np.int64)
-    step_outlines(z1, z2, np.zeros(1, dtype=np.int64), np.zeros((1, 2, 2)), one, f2, 0)
+    idx = np.zeros(1, dtype=np.int64)
+    step_outlines(read_only(z1), read_only(z2), idx, np.zeros((1, 2, 2)), one, f2, 0)
     i0 = np.zeros(0, dtype=np.int64)
     d = Drawing(np.zeros((1, 2, 2)), one, np.ones(1, bool), i0, i0, z2[:0], z2[:0], np.ones(3))
     out = Buffers(
@@ -360,9 +361,9 @@ class RerunLogWriter:
         idx = np.flatnonzero(mask)
         sizes = self.vertex_count[idx] + 1
         points = np.empty((int(sizes.sum()), 2), dtype=np.float32)
-        step_outlines(
-            np.ascontiguousarray(angle, dtype=np.float64),
-            np.ascontiguousarray(position, dtype=np.float64),
+        step_outlines(  # read-only, whoever's arrays they are: one compile
+            read_only(np.ascontiguousarray(angle, dtype=np.float64)),
+            read_only(np.ascontiguousarray(position, dtype=np.float64)),
             idx,
             self.vertices_local,
             self.vertex_count,

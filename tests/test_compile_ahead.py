@@ -10,6 +10,7 @@ import os
 import subprocess
 import sys
 
+import pytest
 from test_determinism import pile_scene
 
 from isaac.engine.compile_ahead import is_cold, solver_kernel
@@ -103,3 +104,44 @@ def test_the_seed_solver_is_the_kernel_prepared_for_the_seed_preset():
     assert (
         solver_kernel(StepSettings.of(pile_scene("balanced").world)) is sequential.solve_sequential
     )
+
+
+_DRIVER_AFTER_COMPILE_DRIVER = r"""
+import json, sys
+from isaac.engine import driver
+from isaac.engine.compile_ahead import compile_driver
+from isaac.engine.simulation import Simulation
+from isaac.scene import load_scene
+
+scene = load_scene(sys.argv[1])
+timed = sys.argv[2] == "timed"
+compile_driver(scene.world, joints=bool(scene.joints), timed=timed)
+after_compile = {n: len(getattr(driver, n).signatures) for n in dir(driver)
+                 if n.startswith("run_steps_") and getattr(driver, n).signatures}
+Simulation(scene, profile=timed).advance(20)
+after_run = {n: len(getattr(driver, n).signatures) for n in dir(driver)
+             if n.startswith("run_steps_") and getattr(driver, n).signatures}
+print(json.dumps([after_compile, after_run]))
+"""
+
+
+@pytest.mark.skipif(os.environ.get("NUMBA_DISABLE_JIT") == "1", reason="counts compiled drivers")
+@pytest.mark.parametrize(
+    "scene, timed, driver",
+    [
+        ("default.yaml", "plain", "run_steps_sequential"),
+        ("pendulum.yaml", "plain", "run_steps_sequential_joints"),
+        ("default.yaml", "timed", "run_steps_sequential_timed"),
+    ],
+)
+def test_compile_driver_compiles_the_driver_a_simulation_then_calls(scene, timed, driver):
+    """`compile_driver` (what `isaac run` calls before waiting for the recorder's helper) on the
+    small world gives the driver of the scene's own run: the run adds no signature."""
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    out = subprocess.run(
+        [sys.executable, "-c", _DRIVER_AFTER_COMPILE_DRIVER, f"scenes/{scene}", timed],
+        capture_output=True, text=True, cwd=root, check=True,
+    )  # fmt: skip
+    after_compile, after_run = json.loads(out.stdout.splitlines()[-1])
+    assert after_compile == {driver: 1}
+    assert after_run == after_compile

@@ -75,12 +75,14 @@ class _SmallWorld:
             joints=(hinge,) if joint else (),
         )
         self.dt = world.dt
+        self.scene = scene
         self.model = build_model(scene)
         self.settings = StepSettings.of(world)
         self.state = initial_state(scene, self.model)
         self.work = Workspace(self.model)
+        joints = self.model.joints.kind.shape[0]  # the hinge's warm-start impulses, or none
         self.cache = ContactCache.of(
-            Contacts.empty(), self.model.n_bodies, np.zeros((0, JOINT_IMPULSES))
+            Contacts.empty(), self.model.n_bodies, np.zeros((joints, JOINT_IMPULSES))
         )
 
 
@@ -151,6 +153,22 @@ def _compile_driver_helpers(small) -> None:
     driver.keep_rows(batch, 0, stepper.scratch, 0, 0)
     driver._keep_state(batch, 0, saved, 0)
     driver._set_existence(model.enters_at, model.leaves_at, saved[4], 0.0)
+
+
+def compile_driver(world, *, joints: bool = False, timed: bool = False) -> None:
+    """Compile (or load) the driver a simulation under `world`'s settings calls (`joints`: its
+    scene has joints; `timed`: `--profile`'s timed driver), by one recorded step of the small
+    world: numba specialises on argument types only, so it is the run's own. For `isaac run`
+    with an empty cache, which compiles the driver before it waits for the recorder's helper
+    (`recorder.compile_ahead`) rather than after."""
+    from isaac.engine import driver
+
+    small = _SmallWorld(world, joint=joints)
+    stepper = driver.Stepper(small.model, small.settings, small.dt, small.work, timed=timed)
+    stepper.set_carry(small.cache)
+    if WAITING:
+        finish()  # the joints' kernels, which the driver's compile links
+    stepper.run(small.state, 1, stepper.new_batch(1))
 
 
 def finish() -> None:

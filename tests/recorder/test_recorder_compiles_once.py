@@ -29,6 +29,7 @@ with Recorder(sim, mcap_path=sys.argv[2], rrd_path=sys.argv[3], offload="thread"
     for batch in sim.batches(int(sys.argv[4]), size=50):
         rec.write_batch(batch)
 kernels = [mcap_pack.first_unfit, mcap_pack.record_sizes, mcap_pack.pack_records,
+           mcap_pack.scan_records, mcap_pack.index_entries, rerun_batch.step_outlines,
            rerun_batch.draw_steps, rerun_batch.batch_stats]
 print(json.dumps({k.__name__: len(k.signatures) for k in kernels}))
 """
@@ -44,4 +45,4 @@ def test_a_recorded_run_compiles_each_packer_and_drawer_once(tmp_path):
     )  # fmt: skip
     counts = json.loads(out.stdout.splitlines()[-1])
     assert counts == {name: 1 for name in counts}, counts
-    assert len(counts) == 5
+    assert len(counts) == 8
