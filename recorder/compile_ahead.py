@@ -24,8 +24,6 @@ import os
 import pickle
 import sys
 
-HELPER_TIMEOUT_S = 300.0  # a helper that takes longer is killed; the run compiles instead
-
 
 def cold(mcap: bool, rrd: bool) -> bool:
     """Whether numba's cache lacks the recorder's longest compiles for these files (MCAP:
@@ -46,45 +44,20 @@ def cold(mcap: bool, rrd: bool) -> bool:
 
 def start(world, *, mcap: bool, rrd: bool, joints: bool):
     """`python -m recorder.compile_ahead` compiling the kernels of these files for a scene with
-    `world`'s settings (`joints`: the scene has joints), `world` and the flags pickled on its
-    standard input; or None when it cannot start. Its output goes nowhere: a helper that fails
-    only means the run compiles itself."""
-    import subprocess
+    `world`'s settings (`joints`: the scene has joints); or None when it cannot start
+    (`isaac.engine.compile_ahead.start_helper`)."""
+    from isaac.engine.compile_ahead import start_helper
 
-    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-    env = dict(os.environ)
-    env["PYTHONPATH"] = os.pathsep.join(p for p in (root, env.get("PYTHONPATH")) if p)
-    try:
-        proc = subprocess.Popen(
-            [sys.executable, "-m", "recorder.compile_ahead"],
-            stdin=subprocess.PIPE,
-            stdout=subprocess.DEVNULL,
-            stderr=subprocess.DEVNULL,
-            env=env,
-        )
-        with proc.stdin:
-            job = (world, bool(mcap), bool(rrd), bool(joints))
-            proc.stdin.write(pickle.dumps(job, protocol=pickle.HIGHEST_PROTOCOL))
-    except OSError:
-        return None
-    return proc
+    return start_helper("recorder.compile_ahead", [], (world, bool(mcap), bool(rrd), bool(joints)))
 
 
 def finish(proc) -> None:
-    """Wait for the helper `start` returned (None: nothing to wait for). Ctrl-C or a failure
-    while waiting kills it first: no helper outlives the run. numba writes a cache file whole
-    (a temporary file, then a rename), so a killed helper leaves none half written."""
-    if proc is None:
-        return
-    import subprocess
+    """Wait for the helper `start` returned (None: nothing to wait for;
+    `isaac.engine.compile_ahead.wait_helper`: Ctrl-C or a failure kills it first)."""
+    if proc is not None:
+        from isaac.engine.compile_ahead import wait_helper
 
-    try:
-        proc.wait(timeout=HELPER_TIMEOUT_S)
-    except BaseException as exc:
-        proc.kill()
-        proc.wait()
-        if not isinstance(exc, subprocess.TimeoutExpired):
-            raise
+        wait_helper(proc)
 
 
 class _TwoBoxRun:

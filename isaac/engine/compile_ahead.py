@@ -107,8 +107,6 @@ def prepare(settings, world, joints: bool = False) -> None:
     jointed_cold = joints and is_cold(joints_kernel())
     if not is_cold(solver_kernel(settings)) and not jointed_cold:
         return
-    import subprocess  # (only with a cold cache: 6 ms of every start-up otherwise)
-
     if jointed_cold and not WAITING:
         joints_helper = _start_helper(world, "joints")
         if joints_helper is not None:
@@ -126,12 +124,11 @@ def prepare(settings, world, joints: bool = False) -> None:
         )
         diverged_body(small.state)
         _compile_driver_helpers(small)
-        helper.wait(timeout=HELPER_TIMEOUT_S)
-    except BaseException as exc:  # Ctrl-C, a failure here, a stuck helper: no orphan left
+    except BaseException:  # Ctrl-C or a failure here: no orphan left
         helper.kill()
         helper.wait()
-        if not isinstance(exc, subprocess.TimeoutExpired):
-            raise
+        raise
+    wait_helper(helper)
 
 
 def _compile_driver_helpers(small) -> None:
@@ -175,17 +172,24 @@ def finish() -> None:
     """Wait for the joints' helper `prepare` started, if any (before the driver's first call:
     its compile links the joints' kernels, which it would otherwise compile itself). A helper
     that fails or takes too long changes nothing: the driver compiles what the cache lacks."""
+    while WAITING:
+        wait_helper(WAITING.pop())
+
+
+def wait_helper(proc: subprocess.Popen) -> None:
+    """Wait for a compile helper to exit. One that takes longer than HELPER_TIMEOUT_S is killed
+    and changes nothing (its caller compiles what the cache lacks); Ctrl-C or a failure while
+    waiting kills it and is raised: no helper outlives its process. numba writes a cache file
+    whole (a temporary file, then a rename), so a killed helper leaves none half written."""
     import subprocess
 
-    while WAITING:
-        helper = WAITING.pop()
-        try:
-            helper.wait(timeout=HELPER_TIMEOUT_S)
-        except BaseException as exc:
-            helper.kill()
-            helper.wait()
-            if not isinstance(exc, subprocess.TimeoutExpired):
-                raise
+    try:
+        proc.wait(timeout=HELPER_TIMEOUT_S)
+    except BaseException as exc:
+        proc.kill()
+        proc.wait()
+        if not isinstance(exc, subprocess.TimeoutExpired):
+            raise
 
 
 def _stop_waiting() -> None:
@@ -202,6 +206,17 @@ def _start_helper(world, what: str = "solver") -> subprocess.Popen | None:
     """`python -m isaac.engine.compile_ahead WHAT`, `world` pickled on its standard input; or
     None."""
     import atexit
+
+    proc = start_helper("isaac.engine.compile_ahead", [what], world)
+    if proc is not None:
+        atexit.register(_stop_waiting)  # (once is enough; registering again is harmless)
+    return proc
+
+
+def start_helper(module: str, args: list[str], job) -> subprocess.Popen | None:
+    """A compile helper: ``python -m module args...`` with this checkout on its path and `job`
+    pickled on its standard input, its output thrown away (a helper that fails only means its
+    caller compiles itself); or None when it cannot start."""
     import subprocess
 
     root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
@@ -209,17 +224,16 @@ def _start_helper(world, what: str = "solver") -> subprocess.Popen | None:
     env["PYTHONPATH"] = os.pathsep.join(p for p in (root, env.get("PYTHONPATH")) if p)
     try:
         proc = subprocess.Popen(
-            [sys.executable, "-m", "isaac.engine.compile_ahead", what],
+            [sys.executable, "-m", module, *args],
             stdin=subprocess.PIPE,
             stdout=subprocess.DEVNULL,
             stderr=subprocess.DEVNULL,
             env=env,
         )
         with proc.stdin:
-            proc.stdin.write(pickle.dumps(world, protocol=pickle.HIGHEST_PROTOCOL))
+            proc.stdin.write(pickle.dumps(job, protocol=pickle.HIGHEST_PROTOCOL))
     except OSError:
         return None
-    atexit.register(_stop_waiting)  # (once is enough; registering again is harmless)
     return proc
 
 
