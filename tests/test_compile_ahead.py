@@ -35,12 +35,15 @@ cold_after_build = is_cold(kernel)
 joints_helper = len(WAITING)
 hashes = [state_hash(rec) for rec in sim.run()]  # the driver: after the joints' helper
 joints = joints_kernel()
+from isaac.engine.driver import keep_rows  # compiled by the solver's helper
 print(json.dumps({{"cold_after_build": cold_after_build, "hashes": hashes,
                    "joints_helper": joints_helper, "waiting_after_run": len(WAITING),
                    "joints_cache_hits": sum(joints.stats.cache_hits.values()),
                    "joints_cache_misses": sum(joints.stats.cache_misses.values()),
                    "solver_cache_hits": sum(kernel.stats.cache_hits.values()),
-                   "solver_cache_misses": sum(kernel.stats.cache_misses.values())}}))
+                   "solver_cache_misses": sum(kernel.stats.cache_misses.values()),
+                   "keep_rows_cache_hits": sum(keep_rows.stats.cache_hits.values()),
+                   "keep_rows_cache_misses": sum(keep_rows.stats.cache_misses.values())}}))
 """
 
 
@@ -67,6 +70,8 @@ def test_a_cold_cache_gets_the_solver_from_its_helper_never_the_joints_and_the_s
     assert got["cold_after_build"] is False  # the helper wrote the solver's cache index
     # the first step loaded the solver from that cache instead of compiling it
     assert (got["solver_cache_hits"], got["solver_cache_misses"]) == (1, 0)
+    # ... and the driver's `keep_rows`, which the helper compiles too (its share of the work)
+    assert (got["keep_rows_cache_hits"], got["keep_rows_cache_misses"]) == (1, 0)
     # no joints: no joints' helper, and neither it nor the driver compiled the joints' kernels
     assert (got["joints_helper"], got["waiting_after_run"]) == (0, 0)
     assert (got["joints_cache_hits"], got["joints_cache_misses"]) == (0, 0)
