@@ -52,12 +52,11 @@ def start(world, *, mcap: bool, rrd: bool, joints: bool):
 
 
 def finish(proc) -> None:
-    """Wait for the helper `start` returned (None: nothing to wait for;
-    `isaac.engine.compile_ahead.wait_helper`: Ctrl-C or a failure kills it first)."""
-    if proc is not None:
-        from isaac.engine.compile_ahead import wait_helper
+    """Wait for the helper `start` returned (`isaac.engine.compile_ahead.wait_helper`: Ctrl-C or
+    a failure kills it first)."""
+    from isaac.engine.compile_ahead import wait_helper
 
-        wait_helper(proc)
+    wait_helper(proc)
 
 
 class _TwoBoxRun:
@@ -79,9 +78,8 @@ class _TwoBoxRun:
         velocity[:] = 0.0
         angular_velocity[:] = 0.0
         exists[:] = True
-        for joint_array in arrays[
-            6 + len(CONTACT_FIELDS) :
-        ]:  # (steps, m, ...): no rows, or the hinge at rest
+        joint_arrays = arrays[6 + len(CONTACT_FIELDS) :]  # (steps, m, ...): none, or the hinge
+        for joint_array in joint_arrays:  # at rest
             joint_array[:] = 0.0
         self._start = StepBatch(0, small.dt, tuple(a.copy() for a in arrays), 1).record(0)
         self.batch = StepBatch(1, small.dt, arrays, 2)

@@ -357,8 +357,9 @@ def cmd_run(args: argparse.Namespace) -> int:
             helper = None
     except BaseException:
         if helper is not None:
-            helper.kill()
-            helper.wait()
+            from isaac.engine.compile_ahead import stop_helper
+
+            stop_helper(helper)
         for child in children.values():
             child.discard()
         for c in claims.values():

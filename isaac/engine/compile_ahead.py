@@ -125,8 +125,7 @@ def prepare(settings, world, joints: bool = False) -> None:
         diverged_body(small.state)
         _compile_driver_helpers(small)
     except BaseException:  # Ctrl-C or a failure here: no orphan left
-        helper.kill()
-        helper.wait()
+        stop_helper(helper)
         raise
     wait_helper(helper)
 
@@ -178,27 +177,28 @@ def finish() -> None:
 def wait_helper(proc: subprocess.Popen) -> None:
     """Wait for a compile helper to exit. One that takes longer than HELPER_TIMEOUT_S is killed
     and changes nothing (its caller compiles what the cache lacks); Ctrl-C or a failure while
-    waiting kills it and is raised: no helper outlives its process. numba writes a cache file
-    whole (a temporary file, then a rename), so a killed helper leaves none half written."""
+    waiting kills it (`stop_helper`) and is raised: no helper outlives its process."""
     import subprocess
 
     try:
         proc.wait(timeout=HELPER_TIMEOUT_S)
     except BaseException as exc:
-        proc.kill()
-        proc.wait()
+        stop_helper(proc)
         if not isinstance(exc, subprocess.TimeoutExpired):
             raise
 
 
 def _stop_waiting() -> None:
-    """At exit (a process that never called the driver): no helper outlives it. numba writes a
-    cache file whole (a temporary file, then a rename), so a killed helper leaves none half
-    written."""
+    """At exit (a process that never called the driver): no helper outlives it."""
     while WAITING:
-        helper = WAITING.pop()
-        helper.kill()
-        helper.wait()
+        stop_helper(WAITING.pop())
+
+
+def stop_helper(proc: subprocess.Popen) -> None:
+    """Kill a compile helper and reap it (numba writes a cache file whole, a temporary file
+    then a rename: a killed helper leaves none half written)."""
+    proc.kill()
+    proc.wait()
 
 
 def _start_helper(world, what: str = "solver") -> subprocess.Popen | None:
