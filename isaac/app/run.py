@@ -241,18 +241,19 @@ def _start_writers(offload: str, claims: dict) -> dict:
 
 def _compiling(scene, *, say: bool) -> bool:
     """Whether numba's cache lacks the step's kernels (the first run on a machine, or after
-    the engine changed): the run then compiles them before its first step, which took 11-13 s
-    for the stages and 19 s more for the compiled driver on the 2-core machine at load 2-3
-    (bench/README.md). say: one line on stderr then, where a new user would otherwise see
-    nothing."""
+    the engine changed): the run then compiles the stages before its first step (8.9-9.2 s to
+    it on the idle 2-core machine), steps on them while a helper compiles the driver, and waits
+    for that helper at its end (17.8-17.9 s in all; bench/README.md). say: one line on stderr
+    then, where a new user would otherwise see nothing."""
     from isaac.engine.compile_ahead import is_cold, solver_kernel
     from isaac.engine.step import StepSettings
 
     cold = is_cold(solver_kernel(StepSettings.of(scene.world)))
     if cold and say:
         print(
-            "compiling the engine's kernels into numba's cache before the first step (a first "
-            "run takes 15-40 s; later runs load them in under a second)",
+            "compiling the engine's kernels into numba's cache (once: the first steps come "
+            "after about 10 s, and a first run takes 15-40 s in all; later runs load them in "
+            "under a second)",
             file=sys.stderr,
         )
     return cold
@@ -280,16 +281,33 @@ def _start_recorder_helper(claims: dict, offload: str, scene, *, say: bool):
     return compile_ahead.start(scene.world, mcap=mcap, rrd=rrd, joints=bool(scene.joints))
 
 
-def _finish_recorder_helper(helper, scene, *, profile: bool) -> None:
-    """The driver compiled (or loaded) while the recorder's helper still runs, then the helper
-    waited for: the recorder loads its kernels from the cache it filled. The driver would
-    otherwise compile at the first step, after the wait, with one core idle (2-core machine:
-    the helper's 24 s of compiling are longer than the engine's 17-20 s)."""
+def _finish_recorder_helper(helper, sim, *, profile: bool) -> None:
+    """The driver compiled (or loaded) while the recorder's helper still runs, unless a helper
+    of the engine's compiles it (`Simulation(tiered=True)`), then the recorder's helper waited
+    for: the recorder loads its kernels from the cache it filled. The driver would otherwise
+    compile at the first step, after the wait, with one core idle (2-core machine: the
+    helper's 24 s of compiling are longer than the engine's 17-20 s)."""
     from isaac.engine.compile_ahead import compile_driver
     from recorder.compile_ahead import finish
 
-    compile_driver(scene.world, joints=bool(scene.joints), timed=profile)
+    if not sim.compiling_driver:
+        scene = sim.scene
+        compile_driver(scene.world, joints=bool(scene.joints), timed=profile)
     finish(helper)
+
+
+def _finish_compiling(sim, *, say: bool) -> None:
+    """At the end of a run on a cold cache whose driver's helper still compiles: wait for it, so
+    that the next run loads the driver (no process is left behind). say: one line on stderr
+    first, since the run's output is complete."""
+    if say and sim.compiling_driver:
+        sys.stdout.flush()  # (the summary first)
+        print(
+            "finishing the compiled driver in numba's cache for later runs (once)",
+            file=sys.stderr,
+            flush=True,
+        )
+    sim.finish_compiling()
 
 
 def _pause_collector(args: argparse.Namespace) -> bool:
@@ -351,9 +369,11 @@ def cmd_run(args: argparse.Namespace) -> int:
         helper = _start_recorder_helper(claims, offload, scene, say=not (args.quiet or compiling))
         if compiling or helper is not None:
             collector_running = _settle_collector(collector_running)
-        sim = Simulation(scene, profile=args.profile)  # --profile: the timed driver
+        # --profile: the timed driver; tiered: with a cold cache, the run steps on the staged
+        # path while a helper compiles the driver (`Simulation`)
+        sim = Simulation(scene, profile=args.profile, tiered=True)
         if helper is not None:
-            _finish_recorder_helper(helper, scene, profile=args.profile)
+            _finish_recorder_helper(helper, sim, profile=args.profile)
             helper = None
     except BaseException:
         if helper is not None:
@@ -494,6 +514,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     for label, out in (("MCAP log", args.mcap), ("Rerun recording", args.rrd)):
         if out:
             print(f"  {label}: {out}")
+    _finish_compiling(sim, say=not args.quiet)
     if stopped is None and signal_in_close is not None:
         files = ", ".join(out for out in (args.mcap, args.rrd) if out)
         print(

@@ -13,6 +13,13 @@ specialises on argument types only (dtypes, dimensions, layouts), never on sizes
 kernels compiled for the small scene are the ones the real scene calls. Nothing here changes what a
 step computes; if the helper cannot start or fails, this process compiles the solver itself, as it
 would without it. A warm cache (the solver's index file exists) skips all of this.
+
+Tiered (`prepare(tiered=True)`, what `isaac run` asks for): the compiled driver, which links every
+stage and compiles on one core for 7.6-9.5 s after them (numba optimises and generates the linked
+stages' code again inside it), is compiled by the solver's helper once this process says the
+other stages are cached, while this process steps on the staged path. A first `isaac run` of the
+default scene: its first step 8.9-9.2 s after the start, against 15.5-19.5 s when it waited for
+the driver; 17.8-17.9 s in all, against 15.8-19.8 s (bench/README.md).
 """
 
 from __future__ import annotations
@@ -97,23 +104,48 @@ def joints_kernel():
     return prepare_joints
 
 
-def prepare(settings, world, joints: bool = False) -> None:
+def driver_kernel(settings, *, joints: bool = False, timed: bool = False):
+    """The compiled driver a simulation with these StepSettings calls (`joints`: its scene has
+    joints; `timed`: `--profile`'s)."""
+    from isaac.engine.driver import driver_kernel as kernel
+
+    return kernel(bool(settings.seed_solver), joints, timed)
+
+
+def prepare(settings, world, joints: bool = False, *, tiered: bool = False):
     """Before the first step of a simulation with these StepSettings and WorldSettings: if the
     solver is not in numba's cache, compile it in a helper process while this one compiles the
     other stages (see the module docstring); and for a scene with joints (`joints`) whose
     joints' kernels are not in it either, compile them in a second helper, which `finish` waits
     for before the driver's first call. A scene without joints never compiles them: its driver
-    and solver are specialisations without the joints' code (`isaac.engine.driver`)."""
+    and solver are specialisations without the joints' code (`isaac.engine.driver`).
+
+    tiered: when the (untimed) driver is not in the cache either, the solver's helper goes on to
+    compile the driver once this process has compiled its share (`_compile_driver_when_told`),
+    rather than this process at the driver's first call, and is returned (else None): the
+    caller steps on the staged path, whose kernels are ready first, until the helper is done
+    (`Simulation(tiered=True)`, `isaac run`; registered to be waited for at exit, so that a run
+    shorter than the compile leaves no process behind and the next run finds the driver)."""
+    import atexit
+
     jointed_cold = joints and is_cold(joints_kernel())
+    driver_cold = tiered and is_cold(driver_kernel(settings, joints=joints))
+    kind = ("driver" if driver_cold else "solver") + ("-joints" if joints else "")
     if not is_cold(solver_kernel(settings)) and not jointed_cold:
-        return
+        if not driver_cold:
+            return None
+        helper = _start_helper(world, kind, talks=True)
+        if helper is not None:
+            atexit.register(wait_helper, helper)
+            release(helper)
+        return helper
     if jointed_cold and not WAITING:
         joints_helper = _start_helper(world, "joints")
         if joints_helper is not None:
             WAITING.append(joints_helper)
-    helper = _start_helper(world, "solver-joints" if joints else "solver")
+    helper = _start_helper(world, kind, talks=driver_cold)
     if helper is None:
-        return
+        return None
     try:
         from isaac.engine.integrate import diverged_body
         from isaac.engine.step import step
@@ -124,10 +156,42 @@ def prepare(settings, world, joints: bool = False) -> None:
         )
         diverged_body(small.state)
         _compile_driver_helpers(small)
+        if not driver_cold:
+            wait_helper(helper)
+            return None
+        if not _solver_ready(helper):
+            return None  # (it failed: the solver and the driver compile at their first calls)
+        finish()  # the staged path calls the joints' kernels too, and the driver links them
     except BaseException:  # Ctrl-C or a failure here: no orphan left
         stop_helper(helper)
         raise
-    wait_helper(helper)
+    atexit.register(wait_helper, helper)
+    release(helper)
+    return helper
+
+
+def _solver_ready(helper: subprocess.Popen) -> bool:
+    """Wait for a driver's helper to say the solver is in the cache (`READY` on its standard
+    output). False when it exits first or takes longer than HELPER_TIMEOUT_S (it is then
+    stopped)."""
+    import select
+
+    with helper.stdout:
+        readable, _, _ = select.select([helper.stdout], [], [], HELPER_TIMEOUT_S)
+        if readable and helper.stdout.read(len(READY)) == READY:
+            return True
+    stop_helper(helper)
+    return False
+
+
+def release(helper: subprocess.Popen) -> None:
+    """Tell a driver's helper that every stage the driver links is in the cache (`GO` on its
+    standard input): it would compile them again otherwise."""
+    try:
+        with helper.stdin:
+            helper.stdin.write(GO)
+    except OSError:  # it has exited (a failure: the driver compiles at its first call)
+        pass
 
 
 def _compile_driver_helpers(small) -> None:
@@ -186,6 +250,7 @@ def wait_helper(proc: subprocess.Popen) -> None:
         stop_helper(proc)
         if not isinstance(exc, subprocess.TimeoutExpired):
             raise
+    _close_pipes(proc)
 
 
 def _stop_waiting() -> None:
@@ -199,23 +264,44 @@ def stop_helper(proc: subprocess.Popen) -> None:
     then a rename: a killed helper leaves none half written)."""
     proc.kill()
     proc.wait()
+    _close_pipes(proc)
 
 
-def _start_helper(world, what: str = "solver") -> subprocess.Popen | None:
+def exited(proc: subprocess.Popen) -> bool:
+    """Whether a compile helper has exited (reaped, its pipes closed), without waiting."""
+    if proc.poll() is None:
+        return False
+    _close_pipes(proc)
+    return True
+
+
+def _close_pipes(proc: subprocess.Popen) -> None:
+    for pipe in (proc.stdin, proc.stdout):
+        if pipe is not None and not pipe.closed:
+            try:
+                pipe.close()
+            except OSError:  # (a write to a helper that exited)
+                pass
+
+
+def _start_helper(world, what: str = "solver", *, talks: bool = False):
     """`python -m isaac.engine.compile_ahead WHAT`, `world` pickled on its standard input; or
-    None."""
+    None. talks: a driver's helper, which waits for `release` and says when the solver is
+    ready (`_solver_ready`)."""
     import atexit
 
-    proc = start_helper("isaac.engine.compile_ahead", [what], world)
+    proc = start_helper("isaac.engine.compile_ahead", [what], world, talks=talks)
     if proc is not None:
         atexit.register(_stop_waiting)  # (once is enough; registering again is harmless)
     return proc
 
 
-def start_helper(module: str, args: list[str], job) -> subprocess.Popen | None:
-    """A compile helper: ``python -m module args...`` with this checkout on its path and `job`
-    pickled on its standard input, its output thrown away (a helper that fails only means its
-    caller compiles itself); or None when it cannot start."""
+def start_helper(module: str, args: list[str], job, *, talks: bool = False):
+    """A compile helper (subprocess.Popen): ``python -m module args...`` with this checkout on
+    its path and `job` pickled on its standard input, its output thrown away (a helper that
+    fails only means its caller compiles itself); or None when it cannot start. talks: its
+    standard input stays open (`release` writes to it and closes it) and its standard output
+    is a pipe to this process (`_solver_ready` reads it)."""
     import subprocess
 
     root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
@@ -225,12 +311,14 @@ def start_helper(module: str, args: list[str], job) -> subprocess.Popen | None:
         proc = subprocess.Popen(
             [sys.executable, "-m", module, *args],
             stdin=subprocess.PIPE,
-            stdout=subprocess.DEVNULL,
+            stdout=subprocess.PIPE if talks else subprocess.DEVNULL,
             stderr=subprocess.DEVNULL,
             env=env,
         )
-        with proc.stdin:
-            proc.stdin.write(pickle.dumps(job, protocol=pickle.HIGHEST_PROTOCOL))
+        proc.stdin.write(pickle.dumps(job, protocol=pickle.HIGHEST_PROTOCOL))
+        proc.stdin.flush()
+        if not talks:
+            proc.stdin.close()
     except OSError:
         return None
     return proc
@@ -283,10 +371,27 @@ def _compile_joints(world) -> None:
     # (keep_joint_impulses, small, is compiled by this process's parent with the other stages)
 
 
+def _compile_driver_when_told(world, joints: bool) -> None:
+    """A driver's helper's work (`prepare`, tiered): the solver (and `keep_rows`), then `READY`
+    on standard output; then, once the parent says the other stages are in the cache too (`GO`
+    on standard input), the driver. Standard input closed without it (the parent stopped or
+    failed): nothing more."""
+    _compile_solver(world, joint=joints)
+    sys.stdout.buffer.write(READY)
+    sys.stdout.buffer.flush()
+    if sys.stdin.buffer.read(len(GO)) == GO:
+        compile_driver(world, joints=joints)
+
+
+READY = b"ready"  # a driver's helper to its parent: the solver is in the cache
+GO = b"go"  # the parent to a driver's helper: so are the other stages
+
 if __name__ == "__main__":
     what = sys.argv[1] if len(sys.argv) > 1 else "solver"
     world = pickle.load(sys.stdin.buffer)
-    if what == "joints":
+    if what in ("driver", "driver-joints"):
+        _compile_driver_when_told(world, joints=what == "driver-joints")
+    elif what == "joints":
         _compile_joints(world)
     else:
         _compile_solver(world, joint=what == "solver-joints")

@@ -663,6 +663,17 @@ def run_steps_sequential_joints_timed(
     )  # fmt: skip
 
 
+def driver_kernel(seed_solver: bool, jointed: bool, timed: bool):
+    """The driver a simulation calls: by its solver (the seed's or the sequential one), whether
+    its scene has joints (a driver without the joints' code for every other scene), and whether
+    it is timed (`isaac run --profile`)."""
+    if jointed:
+        return run_steps_sequential_joints_timed if timed else run_steps_sequential_joints
+    if timed:
+        return run_steps_seed_timed if seed_solver else run_steps_sequential_timed
+    return run_steps_seed if seed_solver else run_steps_sequential
+
+
 class Stepper:
     """One simulation's handle on the compiled driver: its bundles, built once, and the loop
     that grows a buffer and calls again when a step did not fit (Python, once per call or
@@ -715,14 +726,7 @@ class Stepper:
             raise ValueError(
                 "the seed's solver has no joint rows: a scene with joints cannot use it"
             )
-        if jointed:  # (a driver without the joints' code for every other scene)
-            self.kernel = (
-                run_steps_sequential_joints_timed if timed else run_steps_sequential_joints
-            )
-        elif timed:
-            self.kernel = run_steps_seed_timed if s.seed_solver else run_steps_sequential_timed
-        else:
-            self.kernel = run_steps_seed if s.seed_solver else run_steps_sequential
+        self.kernel = driver_kernel(bool(s.seed_solver), jointed, timed)
         self.clock = np.zeros(1 + len(STAGES), dtype=np.int64)  # ns (the timed driver's)
         self.substeps = int(s.substeps)
         self._sized_for = -1

@@ -265,7 +265,13 @@ class StepBatch:
             np.stack([getattr(r, f) for r in records])
             for f in ("position", "angle", "velocity", "angular_velocity", "exists")
         ]
-        rows = Contacts.concatenate([r.contacts for r in records])
+        # copies, even of one record's rows (`Contacts.concatenate` hands one part back as it
+        # is): the batch makes its arrays read-only, and the record's rows are the ones the
+        # staged path's next step reads (a read-only array is another type to numba, and
+        # collide_pairs, match_previous and the solver compiled again for it, 6.7 s)
+        rows = Contacts(
+            *(np.concatenate([getattr(r.contacts, f) for r in records]) for f in CONTACT_FIELDS)
+        )
         joints = ()
         if records[0].joints is not None:
             joints = tuple(np.stack([getattr(r.joints, f) for r in records]) for f in JOINT_FIELDS)

@@ -53,6 +53,7 @@ class Simulation:
         compile_ahead: bool = True,
         staged: bool = False,
         profile: bool = False,
+        tiered: bool = False,
     ) -> None:
         """compile_ahead: on a machine whose numba cache lacks the solver, compile the step's
         kernels in two processes at once before the first step (`isaac.engine.compile_ahead`).
@@ -62,6 +63,12 @@ class Simulation:
         profile: `run`, `advance` and `batches` call the timed driver, which adds up the time
         of each stage inside compiled code (`stage_times`; `isaac run --profile`); the same
         bits. Compiled apart from the plain driver, on first use. (`step()` is not timed.)
+
+        tiered: with compile_ahead, when numba's cache lacks the driver, a helper process
+        compiles it (7-10 s on the 2-core machine), and meanwhile `run`, `advance` and
+        `batches` take the staged path, whose kernels are ready first; they take the driver
+        from the first batch after the helper is done (the same bits either way).
+        `finish_compiling` waits for the helper (at exit at the latest). Not with `profile`.
 
         `step()` always takes the staged path: for one step it is the cheaper one (the driver
         pays for crossing its bundles into compiled code once per call).
@@ -83,8 +90,14 @@ class Simulation:
         self._last = self.record()
         if start is not None:
             self.resume(start)
+        self._compiling = None  # the helper compiling the driver (tiered), while it runs
         if compile_ahead:
-            _ahead.prepare(self.settings, scene.world, joints=bool(self.model.joints.kind.shape[0]))
+            self._compiling = _ahead.prepare(
+                self.settings,
+                scene.world,
+                joints=bool(self.model.joints.kind.shape[0]),
+                tiered=tiered and self._stepper is not None and not profile,
+            )
 
     def resume(self, record: StepRecord) -> None:
         """Continue from a record of this scene (a logged keyframe), keeping the model.
@@ -119,6 +132,32 @@ class Simulation:
         if _ahead.WAITING:
             _ahead.finish()  # the joints' kernels, which the driver's compile links
         return self._stepper.run(self.state, steps, batch)
+
+    def _driver_ready(self) -> bool:
+        """Whether the next steps take the driver: there is one, and no helper is compiling it
+        any more (tiered; a helper that failed leaves the driver to compile at its call)."""
+        if self._stepper is None:
+            return False
+        if self._compiling is not None:
+            if not _ahead.exited(self._compiling):
+                return False
+            self._compiling = None
+        return True
+
+    @property
+    def compiling_driver(self) -> bool:
+        """Whether a helper process is compiling the driver (`tiered`) at this moment."""
+        return not self._driver_ready() and self._stepper is not None
+
+    def finish_compiling(self) -> bool:
+        """Wait for the helper compiling the driver (`tiered`), if it still runs, so that the
+        next run finds the driver in numba's cache. Returns whether there was one to wait for."""
+        if self._compiling is None or _ahead.exited(self._compiling):
+            self._compiling = None
+            return False
+        _ahead.wait_helper(self._compiling)
+        self._compiling = None
+        return True
 
     def stage_times(self) -> dict[str, float]:
         """Seconds spent in each stage of the step inside the timed driver (`profile=True`),
@@ -203,11 +242,10 @@ class Simulation:
         compiled call). Eager, unlike `run`: the steps are taken before it returns.
         `record()` afterwards gives the last state and its step's contacts. Raises
         SimulationError like `step()`, with the state left before the failing step."""
+        while steps > 0 and not self._driver_ready():
+            self._staged_step()
+            steps -= 1
         if steps <= 0:
-            return
-        if self._stepper is None:
-            for _ in range(steps):
-                self._staged_step()
             return
         taken, body, field, _ = self._drive(steps, None)
         if body >= 0:
@@ -254,34 +292,37 @@ class Simulation:
         left = self.scene.world.steps if steps is None else steps
         if size < 1:
             raise ValueError(f"batch size must be >= 1, got {size}")
-        if self._stepper is None:
-            while left > 0:
-                records, error = [], None
-                for _ in range(min(size, left)):
-                    try:
-                        records.append(self._staged_step())
-                    except SimulationError as exc:
-                        error = exc
-                        break
-                if records:
-                    yield StepBatch.of_records(records, self.scene.world.dt)
-                if error is not None:
-                    raise error
-                left -= size
-            return
         while left > 0:
             k = min(size, left)
-            first = self.state.step
-            taken, body, field, arrays = self._drive(k, self._stepper.new_batch(k))
-            if taken:
-                batch = StepBatch(first + 1, self.scene.world.dt, arrays, taken)
-                last = batch.record(taken - 1)
-                self._keep_rows(last.contacts, last.joints)
-                self._last = last
-                yield batch
-            if body >= 0:
-                self._fail(self.state.step + 1, body, field)
             left -= k
+            yield from (self._driven_batch(k) if self._driver_ready() else self._staged_batch(k))
+
+    def _driven_batch(self, k: int) -> Iterator[StepBatch]:
+        """The next k steps' batch from one driver call (none when the first step fails)."""
+        first = self.state.step
+        taken, body, field, arrays = self._drive(k, self._stepper.new_batch(k))
+        if taken:
+            batch = StepBatch(first + 1, self.scene.world.dt, arrays, taken)
+            last = batch.record(taken - 1)
+            self._keep_rows(last.contacts, last.joints)
+            self._last = last
+            yield batch
+        if body >= 0:
+            self._fail(self.state.step + 1, body, field)
+
+    def _staged_batch(self, k: int) -> Iterator[StepBatch]:
+        """The next k steps' batch, a `step()` at a time (the same bits as the driver's)."""
+        records, error = [], None
+        for _ in range(k):
+            try:
+                records.append(self._staged_step())
+            except SimulationError as exc:
+                error = exc
+                break
+        if records:
+            yield StepBatch.of_records(records, self.scene.world.dt)
+        if error is not None:
+            raise error
 
     def _diverged(self) -> tuple[int, int]:
         """(body, index into _FIELDS) of the first body whose state is non-finite or beyond the
