@@ -247,3 +247,48 @@ def test_a_record_after_batches_goes_through_the_compiled_finiteness_check():
     record = sim.record()
     assert len(record.contacts) > 0 and all_finite(record)
     assert all(getattr(record.contacts, f).flags.writeable for f in CONTACT_FIELDS)
+
+
+def _copied(record) -> StepRecord:
+    """A record with copies of its arrays (what it held when copied)."""
+    fields = {f: getattr(record, f) for f in StepRecord.__dataclass_fields__}
+    for f in ("position", "angle", "velocity", "angular_velocity", "exists"):
+        fields[f] = fields[f].copy()
+    contacts = record.contacts
+    fields["contacts"] = type(contacts)(*(getattr(contacts, f).copy() for f in CONTACT_FIELDS))
+    return StepRecord(**fields)
+
+
+def test_batches_and_records_still_held_are_never_written_again():
+    """The driver reuses the arrays of batches nothing references any more
+    (`Stepper.reused_batch`): every batch and record a caller keeps holds its own step."""
+    scene = SCENES["pile-balanced"]()
+    sim = Simulation(scene)
+    held_batches, held_records, as_made = [], [], []
+    for i, batch in enumerate(sim.batches(STEPS, size=3)):
+        if i % 3 == 0:
+            held_batches.append(batch)  # every third batch kept whole
+        elif i % 3 == 1:
+            held_records.append(batch.record(batch.steps - 1))  # of another, one record (a view)
+        as_made.extend(_copied(batch.record(s)) for s in range(batch.steps))
+    by_step = {r.step: r for r in as_made}
+    assert len(by_step) == STEPS
+    for batch in held_batches:
+        for s in range(batch.steps):
+            _same_record(batch.record(s), by_step[batch.first + s])
+    for record in held_records:
+        _same_record(record, by_step[record.step])
+    expected = _stepped(scene, STEPS)
+    for x, y in zip([by_step[s + 1] for s in range(STEPS)], expected):
+        _same_record(x, y)
+
+
+def test_the_arrays_of_a_batch_nothing_references_are_reused():
+    sim = Simulation(SCENES["pile-balanced"]())
+    addresses = set()
+    for batch in sim.batches(STEPS, size=4):
+        addresses.add(batch.position.__array_interface__["data"][0])
+        del batch  # (the loop's name: the caller keeps nothing)
+    # 10 batches in at most SPARE_BATCHES + 1 sets of arrays (the simulation keeps its last
+    # record, and the generator the batch it is yielding)
+    assert len(addresses) <= 4

@@ -300,7 +300,7 @@ class Simulation:
     def _driven_batch(self, k: int) -> Iterator[StepBatch]:
         """The next k steps' batch from one driver call (none when the first step fails)."""
         first = self.state.step
-        taken, body, field, arrays = self._drive(k, self._stepper.new_batch(k))
+        taken, body, field, arrays = self._drive(k, self._stepper.reused_batch(k))
         if taken:
             batch = StepBatch(first + 1, self.scene.world.dt, arrays, taken)
             last = batch.record(taken - 1)
