@@ -295,6 +295,48 @@ def startup(engines: list[str], reps: int) -> list[dict]:
     return out
 
 
+FIRST_RUN_CLI = "isaac run scenes/default.yaml"  # the first-run row a new user meets
+FIRST_RUN_LIMIT_S = 15.0  # the fused-stepping issue's first-run compile, to the first step
+
+
+def first_cli_run(reps: int) -> dict:
+    """`isaac run scenes/default.yaml --verbose`, each time in a fresh, empty NUMBA_CACHE_DIR:
+    the command's own start-up to its first step (its --verbose line: from the command's start,
+    which steps on the staged path while a helper compiles the driver), and the whole process
+    (which waits for that helper at its end)."""
+    first, whole = [], []
+    isaac = str(Path(sys.executable).parent / "isaac")
+    try:
+        for _ in range(reps):
+            with tempfile.TemporaryDirectory(prefix="isaac-numba-") as cache:
+                t0 = time.monotonic()
+                proc = subprocess.run(
+                    [isaac, "run", "scenes/default.yaml", "--verbose", "--quiet"],
+                    cwd=ROOT,
+                    env=subprocess_env(NUMBA_CACHE_DIR=cache),
+                    capture_output=True,
+                    text=True,
+                    timeout=600,
+                )
+                whole.append(time.monotonic() - t0)
+            if proc.returncode != 0:
+                raise RuntimeError((proc.stderr or "").strip().splitlines()[-1:])
+            line = next(ln for ln in proc.stdout.splitlines() if "start-up to first step" in ln)
+            first.append(float(line.split("start-up to first step")[1].split()[0]))
+    except Exception as exc:  # noqa: BLE001 - report, go on
+        return dict(kind="first_cli_run", command=FIRST_RUN_CLI, error=str(exc))
+    return dict(
+        kind="first_cli_run",
+        command=FIRST_RUN_CLI,
+        first_step_s=statistics.median(first),
+        first_step_runs_s=first,
+        whole_s=statistics.median(whole),
+        whole_runs_s=whole,
+        what="empty NUMBA_CACHE_DIR each time; first step: the command's --verbose start-up to "
+        "first step; whole: the process, which waits for the driver's compile helper at its end",
+    )
+
+
 # ---- recording ------------------------------------------------------------------------------
 
 # the recording issue's scenes: the 500-body and the 2,000-body pile (steps timed)
@@ -341,8 +383,22 @@ def _mode_target(rows, engine, mode, scene, limit, over) -> list[dict]:
     return [dict(kind="target", engine=name, what=what, limit=limit, value=value, met=met)]
 
 
-def check_targets(rows, growth_rows, startup_rows, isaac_engines, recordings=()) -> list[dict]:
+def check_targets(
+    rows, growth_rows, startup_rows, isaac_engines, recordings=(), first_cli=None
+) -> list[dict]:
     out = []
+    if first_cli is not None and "error" not in first_cli:
+        value = first_cli["first_step_s"]
+        out.append(
+            dict(
+                kind="target",
+                engine="isaac run",
+                what=f"first-run compile, `{FIRST_RUN_CLI}` to its first step (s)",
+                limit=FIRST_RUN_LIMIT_S,
+                value=value,
+                met=bool(value <= FIRST_RUN_LIMIT_S),
+            )
+        )
     for engine in isaac_engines:
         for what, scene, limit in TARGETS:
             value = None
@@ -428,7 +484,7 @@ def fmt(x, digits: int = 3) -> str:
     return str(x)
 
 
-def markdown(meta, rows, growth_rows, startup_rows, recs, targets) -> str:
+def markdown(meta, rows, growth_rows, startup_rows, recs, targets, first_cli=None) -> str:
     lines = [
         f"Benchmark of {meta['date_utc']} on {meta['machine']} ({meta['cpus']} CPUs), "
         f"Python {meta['python']}, {meta['versions']}; git {meta['git']}. "
@@ -507,6 +563,22 @@ def markdown(meta, rows, growth_rows, startup_rows, recs, targets) -> str:
             "too); first run with an empty NUMBA_CACHE_DIR.",
             "",
         ]
+    if first_cli is not None:
+        if "error" in first_cli:
+            lines += [f"First `{FIRST_RUN_CLI}`: error: {first_cli['error']}", ""]
+        else:
+            runs = ", ".join(
+                f"{a:.1f} / {b:.1f}"
+                for a, b in zip(first_cli["first_step_runs_s"], first_cli["whole_runs_s"])
+            )
+            lines += [
+                f"First `{FIRST_RUN_CLI}` in an empty NUMBA_CACHE_DIR: first step "
+                f"{first_cli['first_step_s']:.1f} s after the command started, "
+                f"{first_cli['whole_s']:.1f} s for the whole process (medians; each run, first "
+                f"step / whole: {runs} s). It steps on the staged path while a helper compiles "
+                "the driver, and waits for that helper at its end.",
+                "",
+            ]
     for rec in recs:
         if "error" in rec:
             lines += [f"Recording ({rec.get('scene')}): error: {rec['error']}", ""]
@@ -732,15 +804,18 @@ def main(argv: list[str] | None = None) -> int:
     # start-up, recording and the targets are measured on the step-by-step rows
     isaac_engines = [e for e in engines if e.startswith("isaac") and "/" not in e]
     startup_rows = []
+    first_cli = None
     if not args.no_startup and not args.quick:
         startup_rows = startup(engines, reps=3)
+        first_cli = first_cli_run(reps=2)
+        log(f"  first {FIRST_RUN_CLI}: {first_cli}")
     recs = []
     if not args.no_recording and not args.quick and isaac_engines:
         preset = "balanced" if "isaac-balanced" in isaac_engines else isaac_engines[0][6:]
         for scene, steps in RECORDING_SCENES:
             recs.append(recording(preset, reps=5, steps=steps, scene=scene))
             log(f"  recording: {recs[-1]}")
-    targets = check_targets(rows, growth_rows, startup_rows, isaac_engines, recs)
+    targets = check_targets(rows, growth_rows, startup_rows, isaac_engines, recs, first_cli)
     sweeps = []
     if not args.no_sweep and not args.quick:
         from bench import sweep as sweep_bench
@@ -751,7 +826,7 @@ def main(argv: list[str] | None = None) -> int:
     meta = meta_info(reps, skipped)
     meta["elapsed_s"] = time.perf_counter() - t_start
     meta["scenes"], meta["engines"] = scenes, engines
-    text = markdown(meta, rows, growth_rows, startup_rows, recs, targets)
+    text = markdown(meta, rows, growth_rows, startup_rows, recs, targets, first_cli)
     if sweeps:
         text += "\n" + sweep_bench.markdown(sweeps[0])
 
@@ -772,6 +847,7 @@ def main(argv: list[str] | None = None) -> int:
     with open(out / f"{stem}.jsonl", "w") as f:
         sweep_targets = [t for s in sweeps for t in s.get("targets", [])]
         objs = [meta, *runs, *rows, *growth_rows, *startup_rows, *recs, *targets]
+        objs += [first_cli] if first_cli is not None else []
         for obj in [*objs, *sweeps, *sweep_targets]:
             f.write(json.dumps(obj, default=_json_default) + "\n")
     (out / f"{stem}.md").write_text(text + "\n")

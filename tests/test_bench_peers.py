@@ -233,3 +233,23 @@ def test_the_small_scene_ratio_targets_are_judged_on_every_path_timed():
     }
     # the step row misses 0.7, advance meets it, run was not timed: no line
     assert pile == {"isaac-balanced": False, "isaac-balanced/advance": True}
+
+
+@pytest.mark.parametrize("first_step, met", [(8.2, True), (16.6, False)])
+def test_the_first_isaac_run_is_judged_to_its_first_step_and_reported_with_its_whole(
+    first_step, met
+):
+    from bench.suite import check_targets, markdown
+
+    first = dict(
+        kind="first_cli_run",
+        first_step_s=first_step,
+        first_step_runs_s=[first_step],
+        whole_s=17.9,
+        whole_runs_s=[17.9],
+    )
+    (target,) = check_targets([], [], [], [], (), first)
+    assert (target["limit"], target["value"], target["met"]) == (15.0, first_step, met)
+    meta = dict(date_utc="d", machine="m", cpus=2, python="3.11", versions="v", git="g", reps=1)
+    text = markdown(meta, [], [], [], [], [target], first)
+    assert f"first step {first_step:.1f} s after the command started, 17.9 s for the whole" in text
