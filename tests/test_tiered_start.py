@@ -39,6 +39,9 @@ class _Compiling:
         self.polls = -1
         return 0
 
+    def kill(self):
+        self.killed = True
+
 
 def _compiling(sim: Simulation, polls: int) -> Simulation:
     sim._compiling = _Compiling(polls)
@@ -89,6 +92,13 @@ def test_finish_compiling_waits_for_the_helper_and_says_whether_there_was_one():
     assert sim.compiling_driver
     assert sim.finish_compiling() is True
     assert not sim.compiling_driver and sim.finish_compiling() is False
+
+
+def test_finish_compiling_with_stop_kills_a_running_helper_instead_of_waiting():
+    sim = _compiling(Simulation(_pile("balanced")), polls=100)
+    helper = sim._compiling
+    assert sim.finish_compiling(stop=True) is True
+    assert getattr(helper, "killed", False) and not sim.compiling_driver
 
 
 def test_a_one_record_batch_of_the_staged_path_leaves_the_records_rows_writable():

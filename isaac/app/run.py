@@ -241,9 +241,9 @@ def _start_writers(offload: str, claims: dict) -> dict:
 
 def _compiling(scene, *, say: bool) -> bool:
     """Whether numba's cache lacks the step's kernels (the first run on a machine, or after
-    the engine changed): the run then compiles the stages before its first step (8.9-9.2 s to
+    the engine changed): the run then compiles the stages before its first step (8.2-10.4 s to
     it on the idle 2-core machine), steps on them while a helper compiles the driver, and waits
-    for that helper at its end (17.8-17.9 s in all; bench/README.md). say: one line on stderr
+    for that helper at its end (15.7-20.5 s in all; bench/README.md). say: one line on stderr
     then, where a new user would otherwise see nothing."""
     from isaac.engine.compile_ahead import is_cold, solver_kernel
     from isaac.engine.step import StepSettings
@@ -296,10 +296,14 @@ def _finish_recorder_helper(helper, sim, *, profile: bool) -> None:
     finish(helper)
 
 
-def _finish_compiling(sim, *, say: bool) -> None:
+def _finish_compiling(sim, *, say: bool, interrupted: bool) -> None:
     """At the end of a run on a cold cache whose driver's helper still compiles: wait for it, so
-    that the next run loads the driver (no process is left behind). say: one line on stderr
-    first, since the run's output is complete."""
+    that the next run loads the driver (no process is left behind); or, when the run was
+    interrupted, stop it (the user asked to stop, not to wait). say: one line on stderr before
+    the wait, since the run's output is complete."""
+    if interrupted:
+        sim.finish_compiling(stop=True)
+        return
     if say and sim.compiling_driver:
         sys.stdout.flush()  # (the summary first)
         print(
@@ -514,7 +518,8 @@ def cmd_run(args: argparse.Namespace) -> int:
     for label, out in (("MCAP log", args.mcap), ("Rerun recording", args.rrd)):
         if out:
             print(f"  {label}: {out}")
-    _finish_compiling(sim, say=not args.quiet)
+    interrupted = (stopped is not None and stopped[0] != "error") or signal_in_close is not None
+    _finish_compiling(sim, say=not args.quiet, interrupted=interrupted)
     if stopped is None and signal_in_close is not None:
         files = ", ".join(out for out in (args.mcap, args.rrd) if out)
         print(

@@ -18,8 +18,8 @@ Tiered (`prepare(tiered=True)`, what `isaac run` asks for): the compiled driver,
 stage and compiles on one core for 7.6-9.5 s after them (numba optimises and generates the linked
 stages' code again inside it), is compiled by the solver's helper once this process says the
 other stages are cached, while this process steps on the staged path. A first `isaac run` of the
-default scene: its first step 8.9-9.2 s after the start, against 15.5-19.5 s when it waited for
-the driver; 17.8-17.9 s in all, against 15.8-19.8 s (bench/README.md).
+default scene: its first step 8.2-10.4 s after the start, against 15.5-19.1 s when it waited for
+the driver; 15.7-20.5 s in all, against 15.8-19.4 s (bench/README.md, "Night").
 """
 
 from __future__ import annotations

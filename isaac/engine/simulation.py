@@ -149,13 +149,14 @@ class Simulation:
         """Whether a helper process is compiling the driver (`tiered`) at this moment."""
         return not self._driver_ready() and self._stepper is not None
 
-    def finish_compiling(self) -> bool:
+    def finish_compiling(self, *, stop: bool = False) -> bool:
         """Wait for the helper compiling the driver (`tiered`), if it still runs, so that the
-        next run finds the driver in numba's cache. Returns whether there was one to wait for."""
+        next run finds the driver in numba's cache; stop: kill it instead (the driver is then
+        compiled by a later run). Returns whether there was one still running."""
         if self._compiling is None or _ahead.exited(self._compiling):
             self._compiling = None
             return False
-        _ahead.wait_helper(self._compiling)
+        (_ahead.stop_helper if stop else _ahead.wait_helper)(self._compiling)
         self._compiling = None
         return True
 
