@@ -9,9 +9,10 @@ that after the last step, while the files were finished (43 s in all, 2026-12-03
 runs `python -m recorder.compile_ahead` as soon as the scene is read: it records two steps of a
 two-box world through `Recorder`, as `isaac run` records (the writer thread, the Rerun drawing,
 read-only batches), into a temporary folder it deletes, so that numba writes the very kernels
-the run calls into the on-disk cache. `isaac run` compiles the engine's meanwhile, the driver
-included (`isaac.engine.compile_ahead.compile_driver`), then waits for the helper (`finish`)
-and loads the recorder's kernels from the cache. Nothing here changes what is recorded; if the
+the run calls into the on-disk cache. `isaac run` compiles the engine's meanwhile (the driver
+in the solver's helper, `isaac.engine.compile_ahead.prepare`, or, when that is not at work,
+here: `compile_driver`), then waits for the helper (`finish`) and loads the recorder's kernels
+from the cache. Nothing here changes what is recorded; if the
 helper cannot start or fails, the run compiles what the cache lacks itself, as it would without
 it. A warm cache (`cold` False) starts nothing.
 

@@ -126,8 +126,6 @@ def prepare(settings, world, joints: bool = False, *, tiered: bool = False):
     caller steps on the staged path, whose kernels are ready first, until the helper is done
     (`Simulation(tiered=True)`, `isaac run`; registered to be waited for at exit, so that a run
     shorter than the compile leaves no process behind and the next run finds the driver)."""
-    import atexit
-
     jointed_cold = joints and is_cold(joints_kernel())
     driver_cold = tiered and is_cold(driver_kernel(settings, joints=joints))
     kind = ("driver" if driver_cold else "solver") + ("-joints" if joints else "")
@@ -136,7 +134,6 @@ def prepare(settings, world, joints: bool = False, *, tiered: bool = False):
             return None
         helper = _start_helper(world, kind, talks=True)
         if helper is not None:
-            atexit.register(wait_helper, helper)
             release(helper)
         return helper
     if jointed_cold and not WAITING:
@@ -165,7 +162,6 @@ def prepare(settings, world, joints: bool = False, *, tiered: bool = False):
     except BaseException:  # Ctrl-C or a failure here: no orphan left
         stop_helper(helper)
         raise
-    atexit.register(wait_helper, helper)
     release(helper)
     return helper
 
@@ -186,7 +182,11 @@ def _solver_ready(helper: subprocess.Popen) -> bool:
 
 def release(helper: subprocess.Popen) -> None:
     """Tell a driver's helper that every stage the driver links is in the cache (`GO` on its
-    standard input): it would compile them again otherwise."""
+    standard input): it would compile them again otherwise. From then on it is waited for at
+    exit at the latest (`wait_helper`)."""
+    import atexit
+
+    atexit.register(wait_helper, helper)
     try:
         with helper.stdin:
             helper.stdin.write(GO)

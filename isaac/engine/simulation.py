@@ -136,25 +136,20 @@ class Simulation:
     def _driver_ready(self) -> bool:
         """Whether the next steps take the driver: there is one, and no helper is compiling it
         any more (tiered; a helper that failed leaves the driver to compile at its call)."""
-        if self._stepper is None:
-            return False
-        if self._compiling is not None:
-            if not _ahead.exited(self._compiling):
-                return False
-            self._compiling = None
-        return True
+        return self._stepper is not None and not self.compiling_driver
 
     @property
     def compiling_driver(self) -> bool:
         """Whether a helper process is compiling the driver (`tiered`) at this moment."""
-        return not self._driver_ready() and self._stepper is not None
+        if self._compiling is not None and _ahead.exited(self._compiling):
+            self._compiling = None
+        return self._compiling is not None
 
     def finish_compiling(self, *, stop: bool = False) -> bool:
         """Wait for the helper compiling the driver (`tiered`), if it still runs, so that the
         next run finds the driver in numba's cache; stop: kill it instead (the driver is then
         compiled by a later run). Returns whether there was one still running."""
-        if self._compiling is None or _ahead.exited(self._compiling):
-            self._compiling = None
+        if not self.compiling_driver:
             return False
         (_ahead.stop_helper if stop else _ahead.wait_helper)(self._compiling)
         self._compiling = None
