@@ -24,7 +24,7 @@ import pyarrow.parquet as pq
 import pytest
 
 from isaac.app.cli import main
-from isaac.app.sweep import execute, load_sweep
+from isaac.app.sweep import SweepError, execute, load_sweep
 from isaac.app.sweep.spec import check_runs, stream
 from isaac.app.sweep.table import TIMING_COLUMNS
 
@@ -543,6 +543,57 @@ def test_a_remote_scheduler_needs_an_absolute_output_folder(tmp_path, capsys):
     assert status == 2 and "absolute path" in err
 
 
+def test_a_client_of_a_scheduler_reached_by_address_needs_an_absolute_output_folder(
+    tmp_path, cluster, monkeypatch
+):
+    """Through the Python API too: a client made from the address (as for a remote scheduler)
+    is refused a relative `out`; a client of a LocalCluster made here is not."""
+    from dask.distributed import Client
+
+    c, local = cluster
+    sweep = _write(
+        tmp_path, BOUNCE_SWEEP.format(scene=SCENES / "bounce.yaml", steps=5, record="none")
+    )
+    monkeypatch.chdir(tmp_path)
+    with Client(c.scheduler_address) as by_address:
+        with pytest.raises(SweepError, match="absolute path"):
+            execute(str(sweep), "rel/out", client=by_address, plots=False)
+    assert not (tmp_path / "rel").exists()
+    result = execute(str(sweep), "rel/here", client=local, plots=False)
+    assert result.table.num_rows == 40 and result.out == str(tmp_path / "rel" / "here")
+
+
+def test_a_slow_start_of_the_runs_is_said_once(tmp_path, cluster, monkeypatch):
+    """A first sweep compiles the kernels before any run starts: `note` says what the wait
+    is (here any start is slow: the limit is 0 s)."""
+    from isaac.app.sweep import command
+
+    _, client = cluster
+    monkeypatch.setattr(command, "SLOW_OPEN_S", 0.0)
+    sweep = _write(
+        tmp_path, BOUNCE_SWEEP.format(scene=SCENES / "bounce.yaml", steps=5, record="none")
+    )
+    notes: list[str] = []
+    execute(str(sweep), str(tmp_path / "out"), client=client, plots=False, note=notes.append)
+    assert len(notes) == 1 and "compiles the engine's kernels" in notes[0]
+
+
+def test_an_ignored_ctrl_c_stays_ignored_while_the_cluster_starts():
+    """A sweep started with SIGINT ignored (a shell script's background job) ignores it
+    throughout, the cluster's start included, instead of stopping only then."""
+    from isaac.app.sweep.cluster import _interrupt_held
+
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        with _interrupt_held() as caught:
+            assert signal.getsignal(signal.SIGINT) is signal.SIG_IGN
+            os.kill(os.getpid(), signal.SIGINT)
+        assert caught == []
+        assert signal.getsignal(signal.SIGINT) is signal.SIG_IGN
+    finally:
+        signal.signal(signal.SIGINT, previous)
+
+
 def test_random_draws_depend_on_seed_sample_and_key_alone(tmp_path):
     text = """\
         scene: {scene}
@@ -694,8 +745,9 @@ def test_ctrl_c_stops_cleanly_and_the_same_command_resumes(tmp_path, cluster):
 @pytest.mark.slow
 def test_a_killed_worker_costs_only_its_run(tmp_path, cluster):
     c, client = cluster
+    # runs of 6,000 steps: a chunk of 10 takes about half a second, so the kill lands inside one
     sweep = _write(
-        tmp_path, BOUNCE_SWEEP.format(scene=SCENES / "bounce.yaml", steps=300, record="mcap")
+        tmp_path, BOUNCE_SWEEP.format(scene=SCENES / "bounce.yaml", steps=6000, record="mcap")
     )
     out = tmp_path / "out"
     import threading
@@ -710,11 +762,21 @@ def test_a_killed_worker_costs_only_its_run(tmp_path, cluster):
     rows = out / "rows"
     deadline = time.monotonic() + 300
     while time.monotonic() < deadline and _rows_written(rows) < 2:
-        time.sleep(0.1)
+        time.sleep(0.02)
     pids = client.run(os.getpid)
-    victim = sorted(pids.values())[0]
-    os.kill(victim, signal.SIGKILL)
+    busy = {w: keys for w, keys in client.processing().items() if keys}
+    victim = sorted(busy)[0]
+    killed_tasks = list(busy[victim])
+    os.kill(pids[victim], signal.SIGKILL)
     thread.join(timeout=600)
+    # the victim was running a chunk when it died, and the scheduler ran that chunk again
+    for key in killed_tasks:
+        sent = client.run_on_scheduler(
+            lambda dask_scheduler, key=key: len(
+                [t for t in dask_scheduler.story(key) if t[2] == "processing"]
+            )
+        )
+        assert sent >= 2, (key, sent)
     table = result["r"].table
     assert table.column("index").to_pylist() == list(range(40))
     assert all(s == "ok" for s in table.column("status").to_pylist())

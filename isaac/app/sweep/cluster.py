@@ -103,6 +103,11 @@ def _interrupt_held():
     if threading.current_thread() is not threading.main_thread():
         yield caught
         return
+    if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+        # ignored from the start (a background job of a shell script): it stays ignored, as it
+        # is for the rest of the sweep, rather than stopping it only while the cluster starts
+        yield caught
+        return
     # the resource tracker's start blocks and then unblocks SIGINT itself: started first, so
     # that it does not unblock it in the middle of the cluster's start
     from multiprocessing import resource_tracker

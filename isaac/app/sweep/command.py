@@ -58,6 +58,7 @@ TASKS_PER_WORKER = 2
 # ... but no smaller than this many body-steps (the base scene's bodies x steps a run): 20 runs
 # of a 2-body scene at 200 steps (about 30 ms), one run of a 100-body pile
 MIN_CHUNK_BODY_STEPS = 8_000
+SLOW_OPEN_S = 3.0  # s without the fan-out's start before `isaac sweep` says what it waits for
 MAX_WARM_UP = 8  # distinct world settings compiled before the fan-out (others as they come)
 # runs whose scenes are checked here before a local cluster is started, for at most this long:
 # where the line falls changes which process finds a refusal, never which run it names (the
@@ -97,6 +98,8 @@ def register(subparsers) -> None:
     p = subparsers.add_parser(
         "sweep",
         help="run a scene many times (grid and random parameters) over Dask; one results table",
+        usage="%(prog)s [options] SWEEP.yaml\n       %(prog)s verify DIR [--scheduler ADDRESS] "
+        "[--workers N] [--quiet]",
         description="Run the sweep file's runs (docs/sweep-format.md) on a local Dask cluster "
         "(one worker process per core) or an existing one; write OUT/runs.parquet, the logs, "
         "plots and a summary. Running the same command again resumes.",
@@ -215,9 +218,11 @@ def execute(
     progress: bool = False,
     plots: bool = True,
     warn=None,
+    note=None,
 ) -> SweepResult:
     """Steps 1-6 of the module docstring; see `run`. `warn`: called with each warning line of
-    the base scene (isaac.scene.warnings), once, before anything runs."""
+    the base scene (isaac.scene.warnings), once, before anything runs; `note`: called with a
+    status line when the workers' preparation is slow (a first sweep compiles the kernels)."""
     started = time.perf_counter()
     phases: dict[str, float] = {}
     sweep = load_sweep(sweep_path)
@@ -228,7 +233,8 @@ def execute(
             warn(line)
     remote = client is not None or bool(scheduler or os.environ.get("DASK_SCHEDULER_ADDRESS"))
     out = out or default_out(sweep_path)
-    if remote and client is None and not os.path.isabs(out):
+    elsewhere = _remote_workers(client) if client is not None else remote
+    if elsewhere and not os.path.isabs(out):
         raise SweepError(
             f"--out {out}: with a scheduler, give an absolute path on storage every worker can "
             "write (the workers write the logs there)",
@@ -271,6 +277,7 @@ def execute(
             chunk,
             progress,
             phases,
+            note,
         )
     else:
         work.prepare_out(sweep, out)
@@ -350,7 +357,34 @@ def _take_rows(client, futures: list, done: dict) -> None:
             done[row["index"]] = row
 
 
-def _fan_out(sweep, todo, out, done, pre, client, scheduler, workers, chunk, progress, phases):
+def _remote_workers(client) -> bool:
+    """Whether a caller's Dask client may have workers on other machines: any but a client of
+    a `LocalCluster` made in this process (a scheduler reached by its address, dask-jobqueue's
+    and Kubernetes' clusters), whose workers need an output path that means the same to them."""
+    from dask.distributed import LocalCluster
+
+    return not isinstance(getattr(client, "cluster", None), LocalCluster)
+
+
+def _opened(gate, note):
+    """The fan-out gate's result (`worker.open_fan_out`); when it takes longer than
+    SLOW_OPEN_S, `note` says why the wait: the checks and, on a first sweep, the kernels'
+    compile (half a minute on a 2-core machine with nothing on screen until the runs began)."""
+    if note is None:
+        return gate.result()
+    try:
+        return gate.result(timeout=SLOW_OPEN_S)
+    except TimeoutError:  # (dask.distributed.TimeoutError is the built-in one)
+        note(
+            "checking the runs and preparing the workers (the first sweep on this machine "
+            "compiles the engine's kernels: up to a minute)"
+        )
+        return gate.result()
+
+
+def _fan_out(
+    sweep, todo, out, done, pre, client, scheduler, workers, chunk, progress, phases, note=None
+):
     """Steps 3 to 5; fills `done` {index: row} and `phases` (seconds). Returns (interrupted,
     workers used)."""
     from dask.distributed import as_completed
@@ -402,7 +436,7 @@ def _fan_out(sweep, todo, out, done, pre, client, scheduler, workers, chunk, pro
         )
         futures.append(gate)  # cancelled with the runs
         del loads  # each chunk's scenes go from the worker with its run task
-        opened = gate.result()
+        opened = _opened(gate, note)
         if opened.get("refused") is not None:
             raise refusal(sweep, opened["refused"])
         if opened.get("error") is not None:
@@ -496,7 +530,11 @@ def _summary(result: SweepResult) -> list[str]:
         f"sweep {sweep.path}: {len(rows)} of {sweep.n_runs} runs: {len(ok)} ok, {len(failed)} "
         f"failed; {result.ran} run now ({result.kept} kept from before) in "
         f"{result.seconds:.1f} s, {rate:.2f} runs/s"
-        + (f" on {result.workers} workers" if result.workers else "")
+        + (
+            f" on {result.workers} worker{'s' if result.workers > 1 else ''}"
+            if result.workers
+            else ""
+        )
     ]
     numeric = [
         f.name
@@ -604,6 +642,9 @@ def cmd_sweep(args: argparse.Namespace) -> int:
             plots=not args.no_plots,
             # the base scene's warnings, once (as isaac check and isaac run say them)
             warn=lambda line: print(f"isaac sweep: warning: {line}", file=sys.stderr),
+            note=None
+            if args.quiet
+            else lambda line: print(f"isaac sweep: {line}", file=sys.stderr),
         )
     finally:
         for s, h in previous.items():
