@@ -423,6 +423,9 @@ def test_bad_grid_exits_2_naming_file_line_and_key(tmp_path, capsys, what, grid,
     assert status == 2
     assert err.count("\n") == 1 and "Traceback" not in err
     assert f"{sweep}:{line}: {key}:" in err, err
+    if what == "unknown key path":  # the key's fault, not a value's
+        assert "no such key in a scene: unknown key 'restitutio'" in err, err
+        assert "did you mean 'restitution'" in err and "value" not in err, err
     assert not (tmp_path / "out").exists()  # refused before anything was written
 
 

@@ -536,6 +536,14 @@ def check_runs(sweep: Sweep, indices=None) -> dict:
 def _run_refusal(sweep: Sweep, index: int, exc: SceneError) -> SweepError:
     draws = sweep.draws(index)
     for axis, node, plain in draws:
+        if exc.path and exc.path == axis.slot.scene_path and exc.what.startswith("unknown key"):
+            # the key path names no place a scene has (a misspelt field): not the value's fault
+            return SweepError(
+                f"no such key in a scene: {exc.what} (scene {exc.path})",
+                source=sweep.path,
+                line=axis.line,
+                path=_sweep_path(axis, sweep.grid),
+            )
         if exc.path and axis.slot.covers(exc.path):
             if axis.dist is not None:
                 line, kind = axis.dist[2], f"drawn value {_shown_value(plain)}"
