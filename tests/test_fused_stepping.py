@@ -315,3 +315,27 @@ def test_a_smaller_batch_reuses_a_larger_ones_arrays_and_keeps_its_bits():
     assert [r.step for r in made] == [r.step for r in expected]
     for x, y in zip(made, expected):
         _same_record(x, y)
+
+
+def test_a_short_batchs_arrays_serve_the_next_runs_full_batch_and_keep_its_bits():
+    """A batch of 6 steps is made with room for 8 (the power of two at or above), so that
+    the next run's batches of 8 take its arrays rather than fresh ones (a bench's warm-up
+    `run(60)`, then batches of 64). Its last record is the simulation's last while the next
+    run's first batch is made: the second takes it."""
+    scene = SCENES["pile-balanced"]()
+    sim = Simulation(scene)
+    short = set()
+    for batch in sim.batches(6, size=8):
+        assert batch.steps == batch.position.shape[0] == 6
+        short.add(batch.position.__array_interface__["data"][0])
+        del batch
+    made, full = [], []
+    for batch in sim.batches(STEPS - 6, size=8):
+        full.append(batch.position.__array_interface__["data"][0])
+        made.extend(_copied(batch.record(s)) for s in range(batch.steps))
+        del batch
+    assert full[0] not in short and full[1] in short
+    expected = _stepped(scene, STEPS)[6:]
+    assert [r.step for r in made] == [r.step for r in expected]
+    for x, y in zip(made, expected):
+        _same_record(x, y)

@@ -816,7 +816,12 @@ class Stepper:
         and pyramid-10's took 76-95 us a step in fresh arrays (1,150 page faults in 240
         steps), 65-66 in reused ones. No one can see the arrays written again: only this
         stepper's list still names them (their reference counts say so). A batch's contents
-        never depend on what its arrays held."""
+        never depend on what its arrays held.
+
+        Fresh arrays have room for k rounded up to a power of two (at most twice the memory):
+        a run's batches then come in few sizes, and a spare one serves the next run's (a
+        bench's warm-up `run(60)` made a batch of 60 that none of its timed `run(240)`'s
+        batches of 64 could take: two fresh batches in the timed steps, not one)."""
         for i, batch in enumerate(self._spare):
             if batch[0].shape[0] >= k and _unreferenced(batch):
                 del self._spare[i]
@@ -824,7 +829,7 @@ class Stepper:
                     a.flags.writeable = True  # (a StepBatch made them read-only)
                 batch[5][:] = 0  # the offsets, as new_batch makes them
                 return batch
-        return self.new_batch(k)
+        return self.new_batch(1 << (k - 1).bit_length())
 
     def _keep_spare(self, batch: tuple) -> None:
         """Keep a recorded batch for `reused_batch`: the last SPARE_BATCHES (a caller holds
