@@ -569,10 +569,10 @@ def test_a_client_of_a_scheduler_reached_by_address_needs_an_absolute_output_fol
 def test_a_slow_start_of_the_runs_is_said_once(tmp_path, cluster, monkeypatch):
     """A first sweep compiles the kernels before any run starts: `note` says what the wait
     is (here any start is slow: the limit is 0 s)."""
-    from isaac.app.sweep import command
+    from isaac.app.sweep import cluster as clusters
 
     _, client = cluster
-    monkeypatch.setattr(command, "SLOW_OPEN_S", 0.0)
+    monkeypatch.setattr(clusters, "SLOW_START_S", 0.0)
     sweep = _write(
         tmp_path, BOUNCE_SWEEP.format(scene=SCENES / "bounce.yaml", steps=5, record="none")
     )
@@ -830,6 +830,38 @@ def test_verify_replays_every_log_and_names_the_run_and_step_of_a_one_ulp_edit(t
     assert bad["first_divergent_step"] == 12 and bad["ulps"] == 1
     assert "'box'" in bad["where"] and bad["field"].startswith("position")
     assert pq.read_table(out / "verify.parquet").to_pylist() == rows
+
+
+def test_verify_replays_one_log_alone_before_the_others_and_says_a_slow_start(
+    tmp_path, cluster, monkeypatch
+):
+    """On a cold numba cache one worker compiles the replay's kernels (the first log, alone)
+    and the others load them; a slow first replay is said (here any: the limit is 0 s)."""
+    from dask.distributed import get_task_stream
+
+    from isaac.app.sweep import cluster as clusters
+    from isaac.app.sweep.verify import verify
+
+    _, client = cluster
+    sweep = _write(
+        tmp_path, BOUNCE_SWEEP.format(scene=SCENES / "bounce.yaml", steps=10, record="mcap")
+    )
+    out = tmp_path / "out"
+    execute(str(sweep), str(out), client=client, plots=False)
+    monkeypatch.setattr(clusters, "SLOW_START_S", 0.0)
+    notes: list[str] = []
+    with get_task_stream(client) as stream:
+        rows = verify(str(out), client=client, note=notes.append).to_pylist()
+    assert [r["index"] for r in rows] == list(range(40))
+    assert all(r["verdict"] == "identical" for r in rows)
+    assert len(notes) == 1 and "replaying the first log" in notes[0]
+    tasks = [t for t in stream.data if t["key"].startswith("verify_chunk")]
+    starts = sorted(
+        (min(s["start"] for s in t["startstops"]), max(s["stop"] for s in t["startstops"]))
+        for t in tasks
+    )
+    lead, others = starts[0], starts[1:]
+    assert len(others) >= 2 and all(start >= lead[1] for start, _ in others)
 
 
 def test_a_generator_option_is_swept_by_index_and_equal_seeds_give_equal_runs(tmp_path, cluster):

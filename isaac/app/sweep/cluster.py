@@ -88,6 +88,21 @@ def _close(client, cluster) -> None:
                 pass
 
 
+SLOW_START_S = 3.0  # s of waiting for the first results before the command says what it waits for
+
+
+def result_noting(future, note, why: str):
+    """`future.result()`; when it has not come after SLOW_START_S, `note(why)` first (a first
+    sweep or verify compiles the kernels for half a minute with nothing on screen)."""
+    if note is None:
+        return future.result()
+    try:
+        return future.result(timeout=SLOW_START_S)
+    except TimeoutError:  # (dask.distributed.TimeoutError is the built-in one)
+        note(why)
+        return future.result()
+
+
 @contextlib.contextmanager
 def _interrupt_held():
     """Ctrl-C (SIGINT) held while the local cluster starts, and noted: yields a list that holds

@@ -41,7 +41,7 @@ import time
 from dataclasses import dataclass, field
 
 from isaac.app.sweep import worker as work
-from isaac.app.sweep.cluster import start_cluster
+from isaac.app.sweep.cluster import result_noting, start_cluster
 from isaac.app.sweep.spec import Sweep, SweepError, load_runs, load_sweep, refusal
 from isaac.errors import IsaacError
 
@@ -58,7 +58,6 @@ TASKS_PER_WORKER = 2
 # ... but no smaller than this many body-steps (the base scene's bodies x steps a run): 20 runs
 # of a 2-body scene at 200 steps (about 30 ms), one run of a 100-body pile
 MIN_CHUNK_BODY_STEPS = 8_000
-SLOW_OPEN_S = 3.0  # s without the fan-out's start before `isaac sweep` says what it waits for
 MAX_WARM_UP = 8  # distinct world settings compiled before the fan-out (others as they come)
 # runs whose scenes are checked here before a local cluster is started, for at most this long:
 # where the line falls changes which process finds a refusal, never which run it names (the
@@ -366,22 +365,6 @@ def _remote_workers(client) -> bool:
     return not isinstance(getattr(client, "cluster", None), LocalCluster)
 
 
-def _opened(gate, note):
-    """The fan-out gate's result (`worker.open_fan_out`); when it takes longer than
-    SLOW_OPEN_S, `note` says why the wait: the checks and, on a first sweep, the kernels'
-    compile (half a minute on a 2-core machine with nothing on screen until the runs began)."""
-    if note is None:
-        return gate.result()
-    try:
-        return gate.result(timeout=SLOW_OPEN_S)
-    except TimeoutError:  # (dask.distributed.TimeoutError is the built-in one)
-        note(
-            "checking the runs and preparing the workers (the first sweep on this machine "
-            "compiles the engine's kernels: up to a minute)"
-        )
-        return gate.result()
-
-
 def _fan_out(
     sweep, todo, out, done, pre, client, scheduler, workers, chunk, progress, phases, note=None
 ):
@@ -436,7 +419,12 @@ def _fan_out(
         )
         futures.append(gate)  # cancelled with the runs
         del loads  # each chunk's scenes go from the worker with its run task
-        opened = _opened(gate, note)
+        opened = result_noting(
+            gate,
+            note,
+            "checking the runs and preparing the workers (the first sweep on this machine "
+            "compiles the engine's kernels: up to a minute)",
+        )
         if opened.get("refused") is not None:
             raise refusal(sweep, opened["refused"])
         if opened.get("error") is not None:
@@ -583,6 +571,7 @@ def cmd_verify(args: argparse.Namespace) -> int:
         scheduler=args.scheduler,
         workers=args.workers,
         progress=not args.quiet and sys.stderr.isatty(),
+        note=None if args.quiet else lambda line: print(f"isaac sweep: {line}", file=sys.stderr),
     )
     rows = table.to_pylist()
     counts: dict[str, int] = {}
