@@ -135,6 +135,23 @@ def test_table_and_logs_are_the_same_with_one_and_two_workers_and_any_chunking(t
 
 
 @pytest.mark.parametrize(
+    "key, label",
+    [
+        ("bodies.box.velocity.x", "bodies.box.velocity.x (m/s)"),
+        ("bodies.velocity.restitution", "bodies.velocity.restitution"),  # a body's name
+        ("world.dt", "world.dt (s)"),
+        ("generators.0.pile.container.width", "generators.0.pile.container.width (m)"),
+        ("generators.0.pile.seed", "generators.0.pile.seed"),
+        ("bodies.box.angle", "bodies.box.angle (rad)"),
+    ],
+)
+def test_a_plotted_parameter_is_labelled_with_its_unit(key, label):
+    from isaac.app.sweep.plots import param_label
+
+    assert param_label(key) == label
+
+
+@pytest.mark.parametrize(
     "runs, workers, least",
     [(1000, 2, 20), (1000, 1, 20), (100, 2, 1), (5, 4, 1), (3, 2, 1), (1, 2, 20), (997, 3, 20)],
 )

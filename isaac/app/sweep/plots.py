@@ -27,6 +27,41 @@ LABELS = {
 }
 
 
+# the unit of a swept value by the scene key it names or is a component of
+# (docs/scene-format.md); none for the dimensionless ones (restitution, friction) and counts
+PARAM_UNITS = {
+    "gravity": "m/s²",
+    "dt": "s",
+    "slop": "m",
+    "restitution_threshold": "m/s",
+    "position": "m",
+    "angle": "rad",
+    "velocity": "m/s",
+    "angular_velocity": "rad/s",
+    "density": "kg/m²",
+    "enters_at": "s",
+    "leaves_at": "s",
+    "box": "m",
+    "base": "m",
+    "spacing": "m",
+    "radius": "m",
+    "width": "m",
+    "height": "m",
+    "thickness": "m",
+}
+
+
+def param_label(key: str) -> str:
+    """A swept key path with its unit: `bodies.box.velocity.x (m/s)`. The body's name and the
+    generator's index and kind are not keys (a body may be called `velocity`)."""
+    segments = key.split(".")
+    skip = {"bodies": 2, "generators": 3, "world": 1}.get(segments[0], 0)
+    for segment in reversed(segments[skip:]):
+        if segment in PARAM_UNITS:
+            return f"{key} ({PARAM_UNITS[segment]})"
+    return key
+
+
 def _safe(name: str) -> str:
     return re.sub(r"[^A-Za-z0-9_.+-]+", "_", name).strip("_") or "column"
 
@@ -62,6 +97,7 @@ def plot_all(table, sweep, out_dir: str) -> list[str] | None:
         ax.hist(values, bins=min(50, max(5, int(len(values) ** 0.5))), color="tab:blue")
         ax.set_xlabel(LABELS.get(metric, metric))
         ax.set_ylabel("runs")
+        ax.yaxis.get_major_locator().set_params(integer=True)  # counts: no 1.5 runs
         ax.set_title(title, fontsize=9)
         fig.tight_layout()
         path = os.path.join(folder, f"hist-{_safe(metric)}.png")
@@ -86,7 +122,7 @@ def plot_all(table, sweep, out_dir: str) -> list[str] | None:
                 where = {c: i for i, c in enumerate(cats)}
                 ax.scatter([where[str(x)] for x in xs], ys, s=8, alpha=0.6, color="tab:blue")
                 ax.set_xticks(range(len(cats)), cats, rotation=30, fontsize=8)
-            ax.set_xlabel(param)
+            ax.set_xlabel(param_label(param))
             ax.set_ylabel(LABELS.get(metric, metric).split(":")[0])
             ax.set_title(title, fontsize=9)
             fig.tight_layout()
