@@ -560,6 +560,13 @@ def _summary(result: SweepResult) -> list[str]:
     return lines
 
 
+def _status(args: argparse.Namespace):
+    """Where a status line goes (stderr), or None with --quiet."""
+    if args.quiet:
+        return None
+    return lambda line: print(f"isaac sweep: {line}", file=sys.stderr)
+
+
 def cmd_verify(args: argparse.Namespace) -> int:
     from isaac.app.sweep.verify import VERIFY_TABLE, verify
 
@@ -571,7 +578,7 @@ def cmd_verify(args: argparse.Namespace) -> int:
         scheduler=args.scheduler,
         workers=args.workers,
         progress=not args.quiet and sys.stderr.isatty(),
-        note=None if args.quiet else lambda line: print(f"isaac sweep: {line}", file=sys.stderr),
+        note=_status(args),
     )
     rows = table.to_pylist()
     counts: dict[str, int] = {}
@@ -631,9 +638,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
             plots=not args.no_plots,
             # the base scene's warnings, once (as isaac check and isaac run say them)
             warn=lambda line: print(f"isaac sweep: warning: {line}", file=sys.stderr),
-            note=None
-            if args.quiet
-            else lambda line: print(f"isaac sweep: {line}", file=sys.stderr),
+            note=_status(args),
         )
     finally:
         for s, h in previous.items():

@@ -79,17 +79,13 @@ def verify(out_dir: str, *, client=None, scheduler=None, workers=None, progress=
         n_workers = max(1, len(client.scheduler_info().get("workers", {})))
         size = max(1, min(20, -(-len(logged) // (n_workers * 8))))
         rel = {str(i): p for i, p in logged}
-        rest = logged[1:]
-        tasks = [
-            {"runs": [(i, os.path.join(out_dir, p)) for i, p in rest[k : k + size]], "rel": rel}
-            for k in range(0, len(rest), size)
-        ]
+        paths = [(i, os.path.join(out_dir, p)) for i, p in logged]
+        lead = {"runs": paths[:1], "rel": rel}
+        tasks = [{"runs": paths[k : k + size], "rel": rel} for k in range(1, len(paths), size)]
         if progress:
             from tqdm import tqdm
 
             bar = tqdm(total=len(logged), unit="log", desc="verify")
-        index, path = logged[0]
-        lead = {"runs": [(index, os.path.join(out_dir, path))], "rel": rel}
         got = result_noting(
             client.submit(verify_chunk, lead, pure=False),
             note,
