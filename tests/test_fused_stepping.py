@@ -68,6 +68,9 @@ def test_every_path_gives_the_staged_steps_bits(name):
     assert sum(len(r.contacts) for r in reference) > 0 or name == "head-on"
 
     _all_same(reference, list(Simulation(scene).run(n)))
+    sim = Simulation(scene)
+    _all_same(reference, [sim.step() for _ in range(n)])
+    assert sim._step_driver  # one driver call a step (numba has the driver by now)
     for size in (1, 7, 64):
         sim = Simulation(scene)
         got = [b.record(s) for b in sim.batches(n, size=size) for s in range(len(b))]
@@ -168,11 +171,14 @@ def test_a_diverging_run_stops_at_the_same_step_naming_the_same_body():
     with pytest.raises(SimulationError) as want:
         for _ in range(50):
             kept.append(staged.step())
-    for how in ("run", "advance", "batches"):
+    for how in ("step", "run", "advance", "batches"):
         sim = Simulation(scene)
         got = []
         with pytest.raises(SimulationError) as err:
-            if how == "run":
+            if how == "step":
+                for _ in range(50):
+                    got.append(sim.step())
+            elif how == "run":
                 got.extend(sim.run(50))
             elif how == "advance":
                 sim.advance(50)
@@ -339,3 +345,57 @@ def test_a_short_batchs_arrays_serve_the_next_runs_full_batch_and_keep_its_bits(
     assert [r.step for r in made] == [r.step for r in expected]
     for x, y in zip(made, expected):
         _same_record(x, y)
+
+
+def test_records_of_step_still_held_and_arrays_taken_from_them_are_never_written_again():
+    """`step()` records into one-step slots it uses again once nothing holds them
+    (`isaac.engine.step_slots`): a record kept, or an array taken from a record that was
+    dropped, keeps its own step."""
+    scene = SCENES["pile-balanced"]()
+    sim = Simulation(scene)
+    kept, arrays, as_made = [], [], []
+    for i in range(STEPS):
+        record = sim.step()
+        as_made.append(_copied(record))
+        if i % 3 == 0:
+            kept.append(record)
+        elif i % 3 == 1:
+            arrays.append((record.step, record.velocity, record.contacts.impulse))
+        del record
+    by_step = {r.step: r for r in as_made}
+    for record in kept:
+        _same_record(record, by_step[record.step])
+    for step, velocity, impulse in arrays:
+        assert velocity.tobytes() == by_step[step].velocity.tobytes()
+        assert impulse.tobytes() == by_step[step].contacts.impulse.tobytes()
+    _all_same(_stepped(scene, STEPS), as_made)
+
+
+def test_step_writes_into_the_same_few_slots_when_no_record_is_held():
+    sim = Simulation(SCENES["pile-balanced"]())
+    blocks = set()
+    for _ in range(STEPS):
+        blocks.add(sim.step().position.base.__array_interface__["data"][0])
+    # the simulation keeps its last record: the slots take turns (at most SPARE_BATCHES)
+    assert len(blocks) <= 3
+    assert not sim.step().position.flags.writeable
+
+
+def test_a_step_whose_rows_outgrow_its_slot_gives_the_staged_steps_bits():
+    scene = _pile("accurate")  # 4 sub-steps: some 100 rows a step
+    sim = Simulation(scene)
+    sim._stepper._rows_per_step = 1  # slots with room for 16 rows
+    got = [sim.step() for _ in range(STEPS)]
+    assert sim._stepper._slot_rows > 16  # a step's rows did not fit: its batch grew
+    _all_same(_stepped(scene, STEPS), got)
+
+
+def test_replace_on_a_record_of_a_batch_gives_a_plain_step_record():
+    import dataclasses
+
+    sim = Simulation(_pile("balanced"))
+    record = sim.step()
+    still = np.zeros_like(record.velocity)
+    changed = dataclasses.replace(record, velocity=still)
+    assert type(changed) is StepRecord and changed.step == record.step
+    assert changed.velocity is still and changed.position is record.position

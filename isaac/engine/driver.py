@@ -12,7 +12,7 @@ the driver's code and its first compile (the default scene's first run: bench/RE
 
 Arguments are named bundles of arrays (`Bodies`, `Pose`, `Scratch`, `Carry`, `Settings`,
 `Batch`), crossed into compiled code once per call: their cost is paid per batch of steps,
-not per stage.
+not per stage (and little even then: see below).
 
 When a step finds more candidate pairs than the scratch holds, or more contact rows than the
 batch has room for, the call puts that step's starting state back and returns, saying how
@@ -34,9 +34,11 @@ without reference counting at all (push_out with 2 rows: 213 -> 104 ns a call). 
 also skips the narrow phase, push-out and solver when there is nothing for them (no pairs, no
 rows): they would do nothing, and a call still paid its counts.
 
-Python crosses into these kernels with plain tuples of the bundles' fields (numba types a
-plain tuple through its fast path, a namedtuple through a slow one: 4.1 against 2.4 us for
-twelve arrays).
+Python crosses into a driver with one object holding the bundles that live as long as the
+buffers (`isaac.engine.driver_kit`: a pointer to unbox, where their 130 arrays as tuples cost
+16 us a call on pile-100), and plain tuples of the pose and the batch (numba types a plain
+tuple through its fast path, a namedtuple through a slow one: 4.1 against 2.4 us for twelve
+arrays).
 
 `run_steps_sequential_timed` and `run_steps_seed_timed` are the same drivers with a clock read
 (`isaac.engine.clock`) between the stages, adding each stage's time up in an array
@@ -55,6 +57,7 @@ import numpy as np
 from isaac.engine import kernel_cache  # noqa: F401  (first: keys the kernels' numba cache)
 from isaac.engine.broad_phase import find_pairs, speculative_reach
 from isaac.engine.clock import monotonic_ns
+from isaac.engine.driver_kit import KitFields, make_batch_kit, make_kit
 from isaac.engine.geometry import transform
 from isaac.engine.integrate import (
     DIVERGED_ANGLE,
@@ -74,9 +77,10 @@ from isaac.engine.joints import (
 )
 from isaac.engine.narrow_phase import collide_pairs, match_previous
 from isaac.engine.push_out import push_out
-from isaac.engine.records import CONTACT_FIELDS
+from isaac.engine.records import CONTACT_FIELDS, StepBatch, StepRecord
 from isaac.engine.solver.seed import solve_seed
 from isaac.engine.solver.sequential import grown_scratch, solve_sequential
+from isaac.engine.step_slots import StepSlot
 
 
 class Bodies(NamedTuple):
@@ -576,91 +580,80 @@ def _run_steps(
 
 
 @numba.njit(cache=True, nogil=True)
-def run_steps_sequential(
-    bodies, cfg, pose, work, carry, saved_pose, saved_carry, batch, table, start, carried, first,
-    k, record, clock,
-):  # fmt: skip
+def run_steps_sequential(kit, pose, batch, start, carried, first, k, record):
     """Advance the pose by up to k steps from state index `first` with the sequential solver,
     writing the batch from index `start` when `record`.
 
-    Every bundle arrives as a plain tuple of its fields (`Bodies`, `Settings`, `Pose`, `Scratch`,
-    `Carry`, `Pose` and `Carry` of the same sizes for undoing a step, `Batch`); table: the
-    solver's scratch (`isaac.engine.solver.sequential`); carried: how many Carry rows are
-    valid; clock: (1 + len(STAGES),) int64, which only the timed drivers write. A scene
+    kit: the bundles that live as long as the buffers (`isaac.engine.driver_kit`: `Bodies`,
+    `Settings`, `Scratch`, `Carry`, the `Pose` and `Carry` a step is undone to, the solver's
+    table, the clock that only the timed drivers write), one object; pose: a plain tuple of the
+    `Pose` fields; batch: a batch kit (`make_batch_kit`) of the `Batch` fields; carried: how
+    many Carry rows are valid. A scene
     without joints only (`run_steps_sequential_joints` otherwise): this driver never types,
     compiles or links the joints' kernels nor the solver's joint passes. Returns (status,
     steps taken, carried, body, field, pairs, rows or scratch entries needed, carried at the
     start of the last step): status DONE, or DIVERGED / NEED_PAIRS / NEED_ROWS / NEED_TABLE
     with the step that did it undone (body, field:
-    `first_diverged`'s). On return `saved_pose` / `saved_carry` hold the start of the last step
-    taken (or undone), which `Stepper.redo_last` computes again to record it."""
+    `first_diverged`'s). On return the kit's `saved_pose` / `saved_carry` hold the start of the
+    last step taken (or undone), which `Stepper.redo_last` computes again to record it."""
     return _run_steps(
-        False, False, False, bodies, Settings(*cfg), pose, work, carry, saved_pose,
-        saved_carry, batch, table, start, carried, first, k, record, clock,
+        False, False, False, kit.bodies, Settings(*kit.settings), pose, kit.scratch,
+        kit.carry, kit.saved_pose, kit.saved_carry, batch.arrays, kit.table, start, carried,
+        first, k, record, kit.clock,
     )  # fmt: skip
 
 
 @numba.njit(cache=True, nogil=True)
-def run_steps_seed(
-    bodies, cfg, pose, work, carry, saved_pose, saved_carry, batch, table, start, carried, first,
-    k, record, clock,
-):  # fmt: skip
+def run_steps_seed(kit, pose, batch, start, carried, first, k, record):
     """`run_steps_sequential` with the seed's single-pass solver."""
     return _run_steps(
-        True, False, False, bodies, Settings(*cfg), pose, work, carry, saved_pose,
-        saved_carry, batch, table, start, carried, first, k, record, clock,
+        True, False, False, kit.bodies, Settings(*kit.settings), pose, kit.scratch,
+        kit.carry, kit.saved_pose, kit.saved_carry, batch.arrays, kit.table, start, carried,
+        first, k, record, kit.clock,
     )  # fmt: skip
 
 
 @numba.njit(cache=True, nogil=True)
-def run_steps_sequential_timed(
-    bodies, cfg, pose, work, carry, saved_pose, saved_carry, batch, table, start, carried, first,
-    k, record, clock,
-):  # fmt: skip
+def run_steps_sequential_timed(kit, pose, batch, start, carried, first, k, record):
     """`run_steps_sequential` that also adds each stage's time to `clock` (ns: clock[0] the
     whole call, clock[1 + i] stage STAGES[i]); the same bits."""
     return _run_steps(
-        False, True, False, bodies, Settings(*cfg), pose, work, carry, saved_pose,
-        saved_carry, batch, table, start, carried, first, k, record, clock,
+        False, True, False, kit.bodies, Settings(*kit.settings), pose, kit.scratch,
+        kit.carry, kit.saved_pose, kit.saved_carry, batch.arrays, kit.table, start, carried,
+        first, k, record, kit.clock,
     )  # fmt: skip
 
 
 @numba.njit(cache=True, nogil=True)
-def run_steps_seed_timed(
-    bodies, cfg, pose, work, carry, saved_pose, saved_carry, batch, table, start, carried, first,
-    k, record, clock,
-):  # fmt: skip
+def run_steps_seed_timed(kit, pose, batch, start, carried, first, k, record):
     """`run_steps_seed` that also adds each stage's time to `clock`, as
     `run_steps_sequential_timed` does."""
     return _run_steps(
-        True, True, False, bodies, Settings(*cfg), pose, work, carry, saved_pose,
-        saved_carry, batch, table, start, carried, first, k, record, clock,
+        True, True, False, kit.bodies, Settings(*kit.settings), pose, kit.scratch,
+        kit.carry, kit.saved_pose, kit.saved_carry, batch.arrays, kit.table, start, carried,
+        first, k, record, kit.clock,
     )  # fmt: skip
 
 
 @numba.njit(cache=True, nogil=True)
-def run_steps_sequential_joints(
-    bodies, cfg, pose, work, carry, saved_pose, saved_carry, batch, table, start, carried, first,
-    k, record, clock,
-):  # fmt: skip
+def run_steps_sequential_joints(kit, pose, batch, start, carried, first, k, record):
     """`run_steps_sequential` for a scene with joints: the joints' kernels and the solver's
     joint passes (the seed's solver has no joint rows: a scene with joints cannot choose it)."""
     return _run_steps(
-        False, False, True, bodies, Settings(*cfg), pose, work, carry, saved_pose, saved_carry,
-        batch, table, start, carried, first, k, record, clock,
+        False, False, True, kit.bodies, Settings(*kit.settings), pose, kit.scratch,
+        kit.carry, kit.saved_pose, kit.saved_carry, batch.arrays, kit.table, start, carried,
+        first, k, record, kit.clock,
     )  # fmt: skip
 
 
 @numba.njit(cache=True, nogil=True)
-def run_steps_sequential_joints_timed(
-    bodies, cfg, pose, work, carry, saved_pose, saved_carry, batch, table, start, carried, first,
-    k, record, clock,
-):  # fmt: skip
+def run_steps_sequential_joints_timed(kit, pose, batch, start, carried, first, k, record):
     """`run_steps_sequential_joints` that also adds each stage's time to `clock`, as
     `run_steps_sequential_timed` does."""
     return _run_steps(
-        False, True, True, bodies, Settings(*cfg), pose, work, carry, saved_pose, saved_carry,
-        batch, table, start, carried, first, k, record, clock,
+        False, True, True, kit.bodies, Settings(*kit.settings), pose, kit.scratch,
+        kit.carry, kit.saved_pose, kit.saved_carry, batch.arrays, kit.table, start, carried,
+        first, k, record, kit.clock,
     )  # fmt: skip
 
 
@@ -685,6 +678,7 @@ class Stepper:
         dt: the step (s); work: the simulation's `isaac.engine.step.Workspace`; timed: call the
         timed driver, which adds each stage's time up (`stage_seconds`)."""
         self.n = model.n_bodies
+        self.dt = float(dt)
         self.work = work
         self.bodies = tuple(
             Bodies(
@@ -731,19 +725,27 @@ class Stepper:
         self.clock = np.zeros(1 + len(STAGES), dtype=np.int64)  # ns (the timed driver's)
         self.substeps = int(s.substeps)
         self._sized_for = -1
+        self.kit = None  # the driver's kit (`isaac.engine.driver_kit`), made at the first call
+        self._kit_table = None  # the solver's table the kit holds
         self.carried = 0
         self._last_start = None  # (state index, carried) of the saved pose and carry, or None
         self._empty_saved()
         self._fit()
         self._empty_batch = self.new_batch(0, 0)  # what an unrecorded call writes nothing into
+        self._empty_batch_kit = None  # its kit, made at the first unrecorded call
         self._spare: list[tuple] = []  # recorded batches, for `reused_batch`
+        self._slots: list[StepSlot] = []  # `one_step`'s
+        self._slot_rows = 0  # the rows a step once needed that its slot had no room for
         self._rows_per_step = 4 * self.n  # first guess at a batch's contact rows per step
 
     def _fit(self) -> None:
-        """(Re)build the scratch and carry tuples for the workspace's current capacity."""
+        """(Re)build the scratch and carry tuples for the workspace's current capacity, and
+        the kit when they or the solver's table (which the staged path grows too) changed."""
         w = self.work
         rows = w.a.shape[0]
         if rows == self._sized_for:
+            if self._kit_table is not w.solver_table:
+                self.kit = None
             return
         self.scratch = tuple(
             Scratch(
@@ -765,6 +767,24 @@ class Stepper:
                 new[:m] = kept[:m]
             self.carry[-1][:] = old[-1]
         self._sized_for = rows
+        self.kit = None  # made again at the next call (`_advance`)
+
+    def _make_kit(self) -> None:
+        """The kit of the current buffers (after `_fit`, or the solver's table grew)."""
+        self.kit = self._kit(self.carry, self.saved_pose, self.saved_carry, self.clock)
+        self._kit_table = self.work.solver_table
+
+    def _kit(self, carry, saved_pose, saved_carry, clock):
+        return make_kit(
+            KitFields(
+                self.bodies, self.settings, self.scratch, carry, saved_pose, saved_carry,
+                self.work.solver_table, clock,
+            )
+        )  # fmt: skip
+
+    def _grow_table(self, need: int) -> None:
+        self.work.solver_table = grown_scratch(self.work.solver_table, need)
+        self.kit = None
 
     def set_carry(self, cache) -> None:
         """Take the `isaac.engine.step.ContactCache` the next step reads."""
@@ -841,18 +861,56 @@ class Stepper:
         """Advance `state` (an `isaac.engine.world.State`) by up to k steps, recording into a
         fresh batch when `batch` is given (from `new_batch(k)`). Returns (steps taken, diverged
         body or -1, field code, the batch, possibly grown)."""
+        taken, body, field, batch = self._advance(state, k, batch)
+        if batch is not None:
+            if taken:
+                self._rows_per_step = max(4, -(-int(batch[5][taken]) // taken))
+            self._keep_spare(batch)
+        return taken, body, field, batch
+
+    def one_step(self, state) -> tuple[StepRecord | None, int, int]:
+        """Advance `state` by one step, recorded into a free `StepSlot` (`Simulation.step()`).
+        Returns (the step's record, or None when it diverged and was undone; body or -1;
+        field code)."""
+        for slot in self._slots:
+            if slot.free():
+                break
+        else:
+            rows = max(16, self._rows_per_step, self._slot_rows)
+            slot = StepSlot(self.new_batch(1, rows), self.dt, make_batch_kit)
+            self._slots.append(slot)
+            del self._slots[:-SPARE_BATCHES]
+        taken, body, field, arrays = self._advance(state, 1, slot.arrays, slot.kit)
+        if not taken:
+            return None, body, field
+        if arrays is not slot.arrays:  # its rows did not fit: bigger slots from now on
+            self._slot_rows = arrays[6].shape[0]
+            self._slots = []
+            return StepBatch(state.step, self.dt, arrays, 1).record(0), -1, -1
+        return slot.record(state.step), -1, -1
+
+    def _advance(
+        self, state, k: int, batch: tuple | None, batch_kit=None
+    ) -> tuple[int, int, int, tuple | None]:
+        """`run` without its bookkeeping of batches (the loop that grows a buffer and calls
+        again); batch_kit: the batch's kit when the caller holds one (a `StepSlot`'s)."""
         self._fit()  # `Simulation.detect` may have grown the workspace
+        if self.kit is None:
+            self._make_kit()
         record = batch is not None
         if batch is None:
-            batch = self._empty_batch
+            if self._empty_batch_kit is None:
+                self._empty_batch_kit = make_batch_kit(self._empty_batch)
+            batch, batch_kit = self._empty_batch, self._empty_batch_kit
+        elif batch_kit is None:
+            batch_kit = make_batch_kit(batch)
         pose = (state.position, state.angle, state.velocity, state.angular_velocity, state.exists)
         self._last_start = None
         taken = 0
         while True:
-            status, done, carried, body, field, need, last_carried = self._call(
-                pose, self.carry, (self.saved_pose, self.saved_carry), batch, taken,
-                self.carried, state.step, k - taken, record,
-            )  # fmt: skip
+            status, done, carried, body, field, need, last_carried = self.kernel(
+                self.kit, pose, batch_kit, taken, self.carried, state.step, k - taken, record
+            )
             self.carried = carried
             state.step += done
             taken += done
@@ -861,16 +919,14 @@ class Stepper:
             if status == NEED_PAIRS:
                 self.work.grow(need)
                 self._fit()
+                self._make_kit()
             elif status == NEED_ROWS:
                 batch = _grown_rows(batch, need)
+                batch_kit = make_batch_kit(batch)
             elif status == NEED_TABLE:
-                self.work.solver_table = grown_scratch(self.work.solver_table, need)
+                self._grow_table(need)
+                self._make_kit()
             else:
-                if record and taken:
-                    at = batch[5][taken]
-                    self._rows_per_step = max(4, -(-int(at) // taken))
-                if record:
-                    self._keep_spare(batch)
                 return taken, body, field, batch if record else None
 
     def stage_seconds(self) -> dict[str, float]:
@@ -879,18 +935,6 @@ class Stepper:
         seconds = {stage: 1e-9 * int(self.clock[1 + i]) for i, stage in enumerate(STAGES)}
         seconds["total"] = 1e-9 * int(self.clock[0])
         return seconds
-
-    def _call(self, pose, carry, saved, batch, start, carried, first, k, record, clock=None):
-        """One call of the compiled driver with this stepper's bundles (`run_steps_sequential`
-        says what each argument is; saved: the (pose, carry) to undo a step with; clock: where
-        a timed driver adds its times, by default this stepper's). Returns (status, steps
-        taken, carried, body, field, needed, carried at the start of the last step)."""
-        status, done, carried, body, field, need, last_carried = self.kernel(
-            self.bodies, self.settings, pose, self.scratch, carry, saved[0], saved[1], batch,
-            self.work.solver_table, start, carried, first, k, record,
-            self.clock if clock is None else clock,
-        )  # fmt: skip
-        return status, done, carried, body, field, need, last_carried
 
     def redo_last(self, state) -> tuple | None:
         """The batch (one step) of the last step the last `run` took, computed again from its
@@ -907,15 +951,16 @@ class Stepper:
         spare_carry = tuple(np.empty_like(a) for a in carry)
         batch = self.new_batch(1)
         while True:
-            status, _, _, _, _, need, _ = self._call(
-                pose, carry, (spare_pose, spare_carry), batch, 0, carried, first, 1, True,
-                np.zeros_like(self.clock),  # (a step taken again is not the run's time)
-            )  # fmt: skip
+            # (a step taken again is not the run's time: a clock of its own)
+            kit = self._kit(carry, spare_pose, spare_carry, np.zeros_like(self.clock))
+            status, _, _, _, _, need, _ = self.kernel(
+                kit, pose, make_batch_kit(batch), 0, carried, first, 1, True
+            )
             if status == NEED_ROWS:
                 batch = _grown_rows(batch, need)
                 continue
             if status == NEED_TABLE:
-                self.work.solver_table = grown_scratch(self.work.solver_table, need)
+                self._grow_table(need)
                 continue
             break
         now = (state.position, state.angle, state.velocity, state.angular_velocity, state.exists)

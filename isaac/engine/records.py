@@ -253,7 +253,7 @@ class StepBatch:
     def record(self, s: int) -> StepRecord:
         """Step s as a `StepRecord` whose arrays are views of this batch, made when first read
         (a record of a 2-body step cost 5 us made eagerly, more than the step)."""
-        return _BatchRecord(self, s)
+        return _BatchRecord.of(self, s)
 
     @staticmethod
     def of_records(records: list[StepRecord], dt: float) -> StepBatch:
@@ -287,12 +287,18 @@ class _BatchRecord(StepRecord):
     first use (functools.cached_property writes the instance's __dict__, which a frozen
     dataclass allows)."""
 
-    def __init__(self, batch: StepBatch, s: int) -> None:
-        d = self.__dict__
-        d["_batch"] = batch
-        d["_s"] = s
-        d["step"] = batch.first + s
-        d["time"] = d["step"] * batch.dt
+    def __new__(cls, *args, **fields):
+        # only `dataclasses.replace` calls the class, to make its copy as type(record)(**fields):
+        # a plain StepRecord
+        return StepRecord(*args, **fields)
+
+    @staticmethod
+    def of(batch: StepBatch, s: int) -> _BatchRecord:
+        """Step s of the batch (made without calling the class: 0.3 us a record less)."""
+        record = object.__new__(_BatchRecord)
+        step = batch.first + s
+        record.__dict__.update(_batch=batch, _s=s, step=step, time=step * batch.dt)
+        return record
 
     def __repr__(self) -> str:
         return "StepRecord" + super().__repr__()[len("_BatchRecord") :]

@@ -62,7 +62,8 @@ class Simulation:
         from Python. Both give the same bits.
         profile: `run`, `advance` and `batches` call the timed driver, which adds up the time
         of each stage inside compiled code (`stage_times`; `isaac run --profile`); the same
-        bits. Compiled apart from the plain driver, on first use. (`step()` is not timed.)
+        bits. Compiled apart from the plain driver, on first use. (`step()` is timed once it
+        takes the driver; not on the staged path.)
 
         tiered: with compile_ahead, when numba's cache lacks the driver, a helper process
         compiles it (7-10 s on the 2-core machine), and meanwhile `run`, `advance` and
@@ -70,8 +71,8 @@ class Simulation:
         from the first batch after the helper is done (the same bits either way).
         `finish_compiling` waits for the helper (at exit at the latest). Not with `profile`.
 
-        `step()` always takes the staged path: for one step it is the cheaper one (the driver
-        pays for crossing its bundles into compiled code once per call).
+        `step()` takes the driver too, for one step a call, once numba has it (loaded or in
+        its cache: `_step_takes_driver`), and the staged path before.
         """
         self.scene = scene
         self.model: Model = build_model(scene)
@@ -84,6 +85,8 @@ class Simulation:
         )
         self.state: State = initial_state(scene, self.model)
         self._contacts = Contacts.empty()
+        self._rows_from = None  # a batch's record whose rows are the current ones (_rows_of)
+        self._step_driver = False  # step() takes the driver (_step_takes_driver)
         self._joints = initial_joint_rows(self.model, self.state, self._work)
         self._cache = ContactCache.of(self._contacts, self.model.n_bodies, self._no_impulses())
         self._carry_in_stepper = False  # which of _cache and the stepper's Carry is current
@@ -107,6 +110,7 @@ class Simulation:
         here gives the same bits as a run that went through it.
         """
         self._restore(record)
+        self._rows_from = None
         self._contacts = record.contacts
         self._joints = record.joints
         impulses = self._no_impulses() if record.joints is None else record.joints.impulses
@@ -125,13 +129,18 @@ class Simulation:
         return self._cache
 
     def _drive(self, steps: int, batch: tuple | None):
-        """`Stepper.run` with the carry handed over from the staged path when it was there."""
+        """`Stepper.run`, once the driver can take over (`_to_driver`)."""
+        self._to_driver()
+        return self._stepper.run(self.state, steps, batch)
+
+    def _to_driver(self) -> None:
+        """Before a driver call: the carry handed over from the staged path when it was there,
+        and the joints' kernels, which the driver's compile links, waited for."""
         if not self._carry_in_stepper:
             self._stepper.set_carry(self._cache)
             self._carry_in_stepper = True
         if _ahead.WAITING:
-            _ahead.finish()  # the joints' kernels, which the driver's compile links
-        return self._stepper.run(self.state, steps, batch)
+            _ahead.finish()
 
     def _driver_ready(self) -> bool:
         """Whether the next steps take the driver: there is one, and no helper is compiling it
@@ -201,7 +210,31 @@ class Simulation:
         Raises SimulationError (naming the step and body) if the state becomes NaN, infinite or
         absurdly large; the state before the failing step is what `record()` returned last.
         """
+        if self._step_driver or self._step_takes_driver():
+            return self._driven_step()
         return self._staged_step()
+
+    def _step_takes_driver(self) -> bool:
+        """Whether `step()` calls the driver for its one step: when the driver is ready and
+        numba has it (loaded, or in its cache). A driver still to compile stays so: a program
+        that only steps (a replay) does not wait 7-10 s for it at its first step; the staged
+        path's kernels are ready sooner (`isaac.engine.compile_ahead`). The same bits either
+        way."""
+        if not self._driver_ready():
+            return False
+        kernel = self._stepper.kernel
+        self._step_driver = bool(getattr(kernel, "signatures", ())) or not _ahead.is_cold(kernel)
+        return self._step_driver
+
+    def _driven_step(self) -> StepRecord:
+        """One step in one driver call (a kit and two tuples cross into compiled code: see
+        `isaac.engine.driver_kit`); its record holds the batch's arrays, as `run`'s do."""
+        self._to_driver()
+        last, body, field = self._stepper.one_step(self.state)
+        if last is None:
+            self._fail(self.state.step + 1, body, field)
+        self._rows_of(last)
+        return last
 
     def _staged_step(self) -> StepRecord:
         if self._last is None:  # after advance(): what a failing step goes back to
@@ -220,6 +253,7 @@ class Simulation:
             self._restore(self._last)
             self._fail(failed, body, field)
         self._contacts, self._cache = contacts, cache
+        self._rows_from = None
         self._joints = joint_rows(self.model, self.state, self._work)
         self._last = self.record()
         return self._last
@@ -254,11 +288,21 @@ class Simulation:
         # the last step's contacts (and joints) are computed again from its start if asked for
         # (record()): None marks both as not made yet
         self._contacts = None
+        self._rows_from = None
         self._last = None
+
+    def _rows_of(self, last: StepRecord) -> None:
+        """Take a batch's record as the current state's: its rows are copied when first asked
+        for (`_contacts_now`), not at every step (14 arrays: about 7 us)."""
+        self._last = last
+        self._contacts = None
+        self._rows_from = last
 
     def _contacts_now(self) -> Contacts:
         """The contacts of the step that made the current state (and its joints, kept in
         self._joints)."""
+        if self._contacts is None and self._rows_from is not None:
+            self._keep_rows(self._rows_from.contacts, self._rows_from.joints)
         if self._contacts is None:
             batch = self._stepper.redo_last(self.state)
             if batch is None:
@@ -273,6 +317,7 @@ class Simulation:
         """Keep private writable copies of a batch's rows as the current step's, like the staged
         step's: a record mixing writable state with a batch's read-only rows is typed apart by
         compiled consumers (all_finite raised a TypingError on it)."""
+        self._rows_from = None
         self._contacts = Contacts(*(getattr(contacts, f).copy() for f in CONTACT_FIELDS))
         self._joints = (
             None
@@ -299,9 +344,7 @@ class Simulation:
         taken, body, field, arrays = self._drive(k, self._stepper.reused_batch(k))
         if taken:
             batch = StepBatch(first + 1, self.scene.world.dt, arrays, taken)
-            last = batch.record(taken - 1)
-            self._keep_rows(last.contacts, last.joints)
-            self._last = last
+            self._rows_of(batch.record(taken - 1))
             yield batch
         if body >= 0:
             self._fail(self.state.step + 1, body, field)
