@@ -381,13 +381,48 @@ def test_step_writes_into_the_same_few_slots_when_no_record_is_held():
     assert not sim.step().position.flags.writeable
 
 
-def test_a_step_whose_rows_outgrow_its_slot_gives_the_staged_steps_bits():
+def test_a_step_whose_rows_outgrow_its_slot_gives_the_staged_steps_bits(monkeypatch):
+    from isaac.engine import driver
+
+    original, grown = driver._grown_rows, []
+
+    def counted(batch, need):
+        grown.append(need)
+        return original(batch, need)
+
+    monkeypatch.setattr(driver, "_grown_rows", counted)
     scene = _pile("accurate")  # 4 sub-steps: some 100 rows a step
     sim = Simulation(scene)
-    sim._stepper._rows_per_step = 1  # slots with room for 16 rows
+    sim._stepper._rows_per_step = 1  # the first slot has room for 16 rows
     got = [sim.step() for _ in range(STEPS)]
-    assert sim._stepper._slot_rows > 16  # a step's rows did not fit: its batch grew
+    assert grown and grown[0] > 16  # a step's rows did not fit: its batch grew
     _all_same(_stepped(scene, STEPS), got)
+
+
+def test_arrays_a_batch_hands_out_are_never_written_again_after_the_batch_is_dropped():
+    """A batch's slot is used again once nothing holds it: not while a caller keeps only an
+    array or the row tuple it handed out as it is (`position`, `row_arrays`)."""
+    scene = SCENES["pile-balanced"]()
+    sim = Simulation(scene)
+    kept, as_made = [], []
+    for i, batch in enumerate(sim.batches(STEPS, size=4)):
+        as_made.extend(_copied(batch.record(s)) for s in range(batch.steps))
+        if i % 3 == 0:
+            kept.append((batch.first, batch.position, None))
+        elif i % 3 == 1:
+            kept.append((batch.first, None, (batch.offsets.copy(), batch.row_arrays)))
+        del batch
+    by_step = {r.step: r for r in as_made}
+    for first, position, rows in kept:
+        for s in range(4):
+            made = by_step[first + s]
+            if position is not None:
+                assert position[s].tobytes() == made.position.tobytes()
+            else:
+                offsets, arrays = rows
+                lo, hi = offsets[s], offsets[s + 1]
+                assert arrays[7][lo:hi].tobytes() == made.contacts.depth.tobytes()
+    _all_same(_stepped(scene, STEPS), as_made)
 
 
 def test_replace_on_a_record_of_a_batch_gives_a_plain_step_record():

@@ -48,7 +48,6 @@ only reads the time: the timed drivers give the same bits.
 
 from __future__ import annotations
 
-import sys
 from typing import NamedTuple
 
 import numba
@@ -733,9 +732,7 @@ class Stepper:
         self._fit()
         self._empty_batch = self.new_batch(0, 0)  # what an unrecorded call writes nothing into
         self._empty_batch_kit = None  # its kit, made at the first unrecorded call
-        self._spare: list[tuple] = []  # recorded batches, for `reused_batch`
-        self._slots: list[StepSlot] = []  # `one_step`'s
-        self._slot_rows = 0  # the rows a step once needed that its slot had no room for
+        self._slots: list[StepSlot] = []  # `recorded`'s, the most recently used last
         self._rows_per_step = 4 * self.n  # first guess at a batch's contact rows per step
 
     def _fit(self) -> None:
@@ -823,71 +820,72 @@ class Stepper:
             )
         )  # fmt: skip
 
-    def reused_batch(self, k: int) -> tuple:
-        """`new_batch(k)`, in the arrays of an earlier batch of at least k steps that nothing
-        references any more (no `StepBatch`, record or view of it is left), else fresh ones.
-        (A batch of room for more steps holds fewer as well: `StepBatch` shows the steps
-        taken, and the driver writes rows up to the arrays' length.)
-
-        Why: a batch of pile-100's 64 steps is some 2.4 MB of contact rows, and fresh arrays
-        that size come from the kernel as pages it zeroes on first write: `Simulation.run`
-        took 86-88 us a step against `advance`'s 66, and 73-75 with the arrays reused. Any
-        size that fits, not only k: `run(240)` after a `run(60)` ends in a batch of 48 steps,
-        and pyramid-10's took 76-95 us a step in fresh arrays (1,150 page faults in 240
-        steps), 65-66 in reused ones. No one can see the arrays written again: only this
-        stepper's list still names them (their reference counts say so). A batch's contents
-        never depend on what its arrays held.
-
-        Fresh arrays have room for k rounded up to a power of two (at most twice the memory):
-        a run's batches then come in few sizes, and a spare one serves the next run's (a
-        bench's warm-up `run(60)` made a batch of 60 that none of its timed `run(240)`'s
-        batches of 64 could take: two fresh batches in the timed steps, not one)."""
-        for i, batch in enumerate(self._spare):
-            if batch[0].shape[0] >= k and _unreferenced(batch):
-                del self._spare[i]
-                for a in batch:
-                    a.flags.writeable = True  # (a StepBatch made them read-only)
-                batch[5][:] = 0  # the offsets, as new_batch makes them
-                return batch
-        return self.new_batch(1 << (k - 1).bit_length())
-
-    def _keep_spare(self, batch: tuple) -> None:
-        """Keep a recorded batch for `reused_batch`: the last SPARE_BATCHES (a caller holds
-        the last one or two while the next is made: its last record, a generator's step)."""
-        self._spare.append(batch)
-        del self._spare[:-SPARE_BATCHES]
-
     def run(self, state, k: int, batch: tuple | None) -> tuple[int, int, int, tuple | None]:
-        """Advance `state` (an `isaac.engine.world.State`) by up to k steps, recording into a
-        fresh batch when `batch` is given (from `new_batch(k)`). Returns (steps taken, diverged
-        body or -1, field code, the batch, possibly grown)."""
-        taken, body, field, batch = self._advance(state, k, batch)
-        if batch is not None:
-            if taken:
-                self._rows_per_step = max(4, -(-int(batch[5][taken]) // taken))
-            self._keep_spare(batch)
-        return taken, body, field, batch
+        """Advance `state` (an `isaac.engine.world.State`) by up to k steps, recording into
+        `batch` when it is given (from `new_batch(k)`). Returns (steps taken, diverged body or
+        -1, field code, the batch, possibly grown, or None)."""
+        return self._advance(state, k, batch)
+
+    def recorded(self, state, k: int) -> tuple[StepBatch | None, int, int]:
+        """Advance `state` by up to k steps, recorded into a free `StepSlot` with room for k
+        (`Simulation.run` and `batches`). Returns (the batch of the steps taken, or None when
+        the first diverged and was undone; body or -1; field code).
+
+        Why slots: a batch's arrays made afresh come from the kernel as pages it zeroes on first
+        write (pile-100 `run` 86-88 us a step against 73-75 in reused arrays), and reusing a
+        batch of tuples cost 12-20 us of Python a call (28 reference counts, 56 write flags, a
+        `StepBatch`). A slot is reused once its reference counts say nothing holds it, and the
+        most recently used free one is taken: the one still in the cache (pile-100 `run`, 16
+        steps a batch: 69-70 us a step against 75-79 cycling through three)."""
+        slot, taken, body, field, arrays = self._into_slot(state, k)
+        if not taken:
+            return None, body, field
+        first = state.step - taken + 1
+        if slot is None:
+            return StepBatch(first, self.dt, arrays, taken), body, field
+        return slot.batch(first, taken), body, field
 
     def one_step(self, state) -> tuple[StepRecord | None, int, int]:
         """Advance `state` by one step, recorded into a free `StepSlot` (`Simulation.step()`).
         Returns (the step's record, or None when it diverged and was undone; body or -1;
         field code)."""
-        for slot in self._slots:
-            if slot.free():
-                break
-        else:
-            rows = max(16, self._rows_per_step, self._slot_rows)
-            slot = StepSlot(self.new_batch(1, rows), self.dt, make_batch_kit)
-            self._slots.append(slot)
-            del self._slots[:-SPARE_BATCHES]
-        taken, body, field, arrays = self._advance(state, 1, slot.arrays, slot.kit)
+        slot, taken, body, field, arrays = self._into_slot(state, 1)
         if not taken:
             return None, body, field
-        if arrays is not slot.arrays:  # its rows did not fit: bigger slots from now on
-            self._slot_rows = arrays[6].shape[0]
-            self._slots = []
+        if slot is None:
             return StepBatch(state.step, self.dt, arrays, 1).record(0), -1, -1
         return slot.record(state.step), -1, -1
+
+    def _into_slot(self, state, k: int):
+        """Up to k steps recorded into a free slot: (the slot, or None when the rows outgrew it
+        and `arrays` are grown ones; steps taken; body; field; arrays)."""
+        slot = self._free_slot(k)
+        taken, body, field, arrays = self._advance(state, k, slot.arrays, slot.kit)
+        self._slots.remove(slot)
+        if arrays is slot.arrays:
+            self._slots.append(slot)  # the most recently used, last
+        else:
+            slot = None  # too small: dropped (later slots have room for the rows seen)
+            self._rows_per_step = max(self._rows_per_step, -(-arrays[6].shape[0] // k))
+        if taken:
+            self._rows_per_step = max(4, -(-int(arrays[5][taken]) // taken))
+        return slot, taken, body, field, arrays
+
+    def _free_slot(self, k: int) -> StepSlot:
+        """The most recently used slot with room for k steps that nothing holds, or a new one
+        with room for k rounded up to a power of two (so that a run's batches come in few sizes:
+        a bench's warm-up `run(60)` then serves its timed `run(240)`'s batches of 64)."""
+        for slot in reversed(self._slots):
+            if slot.steps >= k and slot.free():
+                return slot
+        steps = 1 << (k - 1).bit_length()
+        # room for half as many rows again as the last call's steps had: the rows of a pile
+        # come and go from step to step, and a slot they outgrow is made again
+        rows = max(16, 3 * self._rows_per_step * steps // 2)
+        slot = StepSlot(self.new_batch(steps, rows), self.dt, make_batch_kit)
+        self._slots.append(slot)
+        del self._slots[:-SPARE_BATCHES]
+        return slot
 
     def _advance(
         self, state, k: int, batch: tuple | None, batch_kit=None
@@ -988,13 +986,6 @@ def _carry_arrays(rows: int, joints: int) -> tuple:
 
 
 SPARE_BATCHES = 3
-
-
-def _unreferenced(batch: tuple) -> bool:
-    """Whether nothing but `batch` (a tuple some list holds) references its arrays: each one's
-    count is then the tuple's reference, the loop's name and getrefcount's argument (a view of
-    an array counts as a reference to it: numpy's views name the array that owns the data)."""
-    return all(sys.getrefcount(a) == 3 for a in batch)
 
 
 def _grown_rows(batch: tuple, needed: int) -> tuple:

@@ -1,14 +1,14 @@
-"""One-step batches that `Simulation.step()` records into, each used again once no record
-holds it.
+"""Batches the driver records into (`Simulation.step()`, `run`, `batches`), each used again
+once nothing holds it.
 
-`step()` takes one driver call a step, and the record it returns must stay as it was, whatever
-steps come after. A fresh batch a step (28 arrays), or `Stepper.reused_batch` (28 reference
-counts to read and 56 write flags to turn), cost 12-20 us of Python a step on pile-100, a
-quarter of its physics. A slot's 28 arrays are views of one block of memory, made once; the
-record a step hands out reads them through the slot's `StepBatch` (read-only views). So two
-reference counts say whether anything still holds the slot: the `StepBatch`'s (a record of
-it) and the block's (any array taken from such a record, which numpy makes a view of the
-block). A slot in use is never written; a new one is made instead.
+A batch handed out must stay as it was, whatever steps come after. A fresh batch a call (28
+arrays, whose pages the kernel zeroes on first write), or a reused batch of plain arrays (28
+reference counts to read, 56 write flags to turn, a `StepBatch` to make), cost 12-20 us of
+Python a call on pile-100: a quarter of a step for `step()`. A slot's 28 arrays are views of one
+block of memory, made once, with their kit for the driver and the `StepBatch` of read-only views
+that hands them out. So two reference counts say whether anything still holds the slot: the
+`StepBatch`'s (the batch, or a record of it) and the block's (any array taken from them, which
+numpy makes a view of the block). A slot in use is never written; another is taken or made.
 """
 
 from __future__ import annotations
@@ -23,38 +23,63 @@ _ALIGN = 64  # bytes: each array starts on a cache line (numba types a misaligne
 
 
 class StepSlot:
-    """A one-step batch whose arrays are views of one block (`Batch`'s fields, in order)."""
+    """A batch whose arrays are views of one block (`isaac.engine.driver.Batch`'s fields, in
+    order)."""
 
     def __init__(self, template: tuple, dt: float, kit_of) -> None:
-        """template: a one-step batch (`Stepper.new_batch(1, rows)`) whose shapes and dtypes
-        the slot's arrays take; dt: the step (s); kit_of: what makes the arrays' batch kit for
-        the driver (`isaac.engine.driver_kit.make_batch_kit`)."""
+        """template: a batch (`Stepper.new_batch(steps)`) whose shapes and dtypes the slot's
+        arrays take; dt: the step (s); kit_of: what makes the arrays' batch kit for the driver
+        (`isaac.engine.driver_kit.make_batch_kit`)."""
         sizes = [-(-a.nbytes // _ALIGN) * _ALIGN for a in template]
         self._block = np.empty(max(1, sum(sizes)), dtype=np.uint8)
         arrays, at = [], 0
         for a, size in zip(template, sizes):
             arrays.append(self._block[at : at + a.nbytes].view(a.dtype).reshape(a.shape))
             at += size
-        arrays[5][:] = 0  # the offsets: the step's rows start at row 0 (the driver writes [1])
+        arrays[5][:] = 0  # the offsets: a call's rows start at row 0 (the driver writes [1:])
         self.arrays = tuple(arrays)  # what the driver writes
         self.kit = kit_of(self.arrays)  # (made once: 6 us)
-        self._batch = StepBatch(0, dt, tuple(a.view() for a in arrays), 1)  # read-only views
+        self.steps = self.arrays[0].shape[0]  # room for this many steps
+        self._views = tuple(a.view() for a in arrays)  # (StepBatch makes them read-only)
+        self._batch = StepBatch(0, dt, self._views, self.steps)
+        self._dt = dt
+        b = self._batch
+        # what the batch hands out as it is, not as a new view: its arrays and their tuples
+        self._handed = (
+            b.position, b.angle, b.velocity, b.angular_velocity, b.exists, b.offsets, b._rows,
+            *b._rows, *(b._joints or ()),
+        )  # fmt: skip
+        del b  # (the counts below are the slot's own references alone)
         self._idle = self._references()
+        self._idle_handed = self._handed_references()
+        self._lent = False  # whether the batch itself went out (`batch`), not only a record
 
     def _references(self) -> tuple[int, int]:
         return sys.getrefcount(self._batch), sys.getrefcount(self._block)
 
+    def _handed_references(self) -> list[int]:
+        return [sys.getrefcount(a) for a in self._handed]
+
     def free(self) -> bool:
-        """Whether nothing outside the slot holds its batch or any view of its block."""
-        return self._references() == self._idle
+        """Whether nothing outside the slot holds its batch, an array or tuple the batch hands
+        out as it is (`position`, `row_arrays`, ...; checked only once the batch itself went
+        out), or any view of its block (whatever else a batch or a record hands out)."""
+        if self._references() != self._idle:
+            return False
+        return not self._lent or self._handed_references() == self._idle_handed
 
-    @property
-    def rows(self) -> int:
-        """How many contact rows the slot has room for."""
-        return self.arrays[6].shape[0]
+    def batch(self, first: int, steps: int) -> StepBatch:
+        """The batch of the `steps` steps just written, the first of them step `first`: the
+        slot's own `StepBatch` when they fill it, else one over new views of the block."""
+        self._lent = True
+        if steps == self.steps:
+            self._batch.first = first
+            return self._batch
+        return StepBatch(first, self._dt, tuple(a.view() for a in self._views), steps)
 
-    def record(self, step: int) -> StepRecord:
-        """The record of the step just written, as step `step` (its views are made when first
-        read, as `StepBatch.record`'s)."""
-        self._batch.first = step
+    def record(self, first: int) -> StepRecord:
+        """The record of the one step just written, as step `first` (its arrays are views made
+        when first read, which hold the block; the batch itself stays in the slot)."""
+        self._lent = False
+        self._batch.first = first
         return self._batch.record(0)
