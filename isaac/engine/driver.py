@@ -985,6 +985,8 @@ def _carry_arrays(rows: int, joints: int) -> tuple:
     )
 
 
+# the slots a stepper keeps (`recorded`): a caller holds the last one or two while the next is
+# written (the simulation its last record, a generator its batch)
 SPARE_BATCHES = 3
 
 

@@ -216,10 +216,10 @@ class Simulation:
 
     def _step_takes_driver(self) -> bool:
         """Whether `step()` calls the driver for its one step: when the driver is ready and
-        numba has it (loaded, or in its cache). A driver still to compile stays so: a program
-        that only steps (a replay) does not wait 7-10 s for it at its first step; the staged
-        path's kernels are ready sooner (`isaac.engine.compile_ahead`). The same bits either
-        way."""
+        numba has it (loaded, or in its cache). While the driver is still to be compiled,
+        `step()` keeps to the staged path, whose kernels are ready sooner
+        (`isaac.engine.compile_ahead`): a program that only steps (a replay) does not wait
+        7-10 s for the driver at its first step. The same bits either way."""
         if not self._driver_ready():
             return False
         kernel = self._stepper.kernel
@@ -227,8 +227,8 @@ class Simulation:
         return self._step_driver
 
     def _driven_step(self) -> StepRecord:
-        """One step in one driver call (a kit and two tuples cross into compiled code: see
-        `isaac.engine.driver_kit`); its record holds the batch's arrays, as `run`'s do."""
+        """One step in one driver call (two kits and the pose cross into compiled code: see
+        `isaac.engine.driver_kit`); its record holds a slot's arrays, as `run`'s do."""
         self._to_driver()
         last, body, field = self._stepper.one_step(self.state)
         if last is None:
