@@ -879,9 +879,10 @@ class Stepper:
             if slot.steps >= k and slot.free():
                 return slot
         steps = 1 << (k - 1).bit_length()
-        # room for half as many rows again as the last call's steps had: the rows of a pile
-        # come and go from step to step, and a slot they outgrow is made again
-        rows = max(16, 3 * self._rows_per_step * steps // 2)
+        # room for the rows the last call's steps had, and half a step's more: the rows of a
+        # pile come and go from step to step (a slot they outgrow is made again), and a batch of
+        # many steps evens them out
+        rows = max(16, self._rows_per_step * steps + self._rows_per_step // 2)
         slot = StepSlot(self.new_batch(steps, rows), self.dt, make_batch_kit)
         self._slots.append(slot)
         del self._slots[:-SPARE_BATCHES]
