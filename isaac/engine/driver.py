@@ -741,8 +741,6 @@ class Stepper:
         w = self.work
         rows = w.a.shape[0]
         if rows == self._sized_for:
-            if self._kit_table is not w.solver_table:
-                self.kit = None
             return
         self.scratch = tuple(
             Scratch(
@@ -764,12 +762,15 @@ class Stepper:
                 new[:m] = kept[:m]
             self.carry[-1][:] = old[-1]
         self._sized_for = rows
-        self.kit = None  # made again at the next call (`_advance`)
+        self.kit = None  # made again at the next call (`_current_kit`)
 
-    def _make_kit(self) -> None:
-        """The kit of the current buffers (after `_fit`, or the solver's table grew)."""
-        self.kit = self._kit(self.carry, self.saved_pose, self.saved_carry, self.clock)
-        self._kit_table = self.work.solver_table
+    def _current_kit(self):
+        """The kit of the current buffers: made again after `_fit` rebuilt them or the solver's
+        table was replaced (grown here, or by the staged path)."""
+        if self.kit is None or self._kit_table is not self.work.solver_table:
+            self.kit = self._kit(self.carry, self.saved_pose, self.saved_carry, self.clock)
+            self._kit_table = self.work.solver_table
+        return self.kit
 
     def _kit(self, carry, saved_pose, saved_carry, clock):
         return make_kit(
@@ -778,10 +779,6 @@ class Stepper:
                 self.work.solver_table, clock,
             )
         )  # fmt: skip
-
-    def _grow_table(self, need: int) -> None:
-        self.work.solver_table = grown_scratch(self.work.solver_table, need)
-        self.kit = None
 
     def set_carry(self, cache) -> None:
         """Take the `isaac.engine.step.ContactCache` the next step reads."""
@@ -820,12 +817,6 @@ class Stepper:
             )
         )  # fmt: skip
 
-    def run(self, state, k: int, batch: tuple | None) -> tuple[int, int, int, tuple | None]:
-        """Advance `state` (an `isaac.engine.world.State`) by up to k steps, recording into
-        `batch` when it is given (from `new_batch(k)`). Returns (steps taken, diverged body or
-        -1, field code, the batch, possibly grown, or None)."""
-        return self._advance(state, k, batch)
-
     def recorded(self, state, k: int) -> tuple[StepBatch | None, int, int]:
         """Advance `state` by up to k steps, recorded into a free `StepSlot` with room for k
         (`Simulation.run` and `batches`). Returns (the batch of the steps taken, or None when
@@ -860,13 +851,12 @@ class Stepper:
         """Up to k steps recorded into a free slot: (the slot, or None when the rows outgrew it
         and `arrays` are grown ones; steps taken; body; field; arrays)."""
         slot = self._free_slot(k)
-        taken, body, field, arrays = self._advance(state, k, slot.arrays, slot.kit)
+        taken, body, field, arrays = self.run(state, k, slot.arrays, slot.kit)
         self._slots.remove(slot)
         if arrays is slot.arrays:
             self._slots.append(slot)  # the most recently used, last
         else:
             slot = None  # too small: dropped (later slots have room for the rows seen)
-            self._rows_per_step = max(self._rows_per_step, -(-arrays[6].shape[0] // k))
         if taken:
             self._rows_per_step = max(4, -(-int(arrays[5][taken]) // taken))
         return slot, taken, body, field, arrays
@@ -888,14 +878,15 @@ class Stepper:
         del self._slots[:-SPARE_BATCHES]
         return slot
 
-    def _advance(
+    def run(
         self, state, k: int, batch: tuple | None, batch_kit=None
     ) -> tuple[int, int, int, tuple | None]:
-        """`run` without its bookkeeping of batches (the loop that grows a buffer and calls
-        again); batch_kit: the batch's kit when the caller holds one (a `StepSlot`'s)."""
+        """Advance `state` (an `isaac.engine.world.State`) by up to k steps, recording into
+        `batch` when it is given (from `new_batch(k)`; batch_kit: its kit when the caller holds
+        one, a `StepSlot`'s). Returns (steps taken, diverged body or -1, field code, the batch,
+        possibly grown, or None). The loop grows a buffer and calls again when a step did not
+        fit."""
         self._fit()  # `Simulation.detect` may have grown the workspace
-        if self.kit is None:
-            self._make_kit()
         record = batch is not None
         if batch is None:
             if self._empty_batch_kit is None:
@@ -908,8 +899,9 @@ class Stepper:
         taken = 0
         while True:
             status, done, carried, body, field, need, last_carried = self.kernel(
-                self.kit, pose, batch_kit, taken, self.carried, state.step, k - taken, record
-            )
+                self._current_kit(), pose, batch_kit, taken, self.carried, state.step, k - taken,
+                record,
+            )  # fmt: skip
             self.carried = carried
             state.step += done
             taken += done
@@ -918,13 +910,11 @@ class Stepper:
             if status == NEED_PAIRS:
                 self.work.grow(need)
                 self._fit()
-                self._make_kit()
             elif status == NEED_ROWS:
                 batch = _grown_rows(batch, need)
                 batch_kit = make_batch_kit(batch)
             elif status == NEED_TABLE:
-                self._grow_table(need)
-                self._make_kit()
+                self.work.solver_table = grown_scratch(self.work.solver_table, need)
             else:
                 return taken, body, field, batch if record else None
 
@@ -959,7 +949,7 @@ class Stepper:
                 batch = _grown_rows(batch, need)
                 continue
             if status == NEED_TABLE:
-                self._grow_table(need)
+                self.work.solver_table = grown_scratch(self.work.solver_table, need)
                 continue
             break
         now = (state.position, state.angle, state.velocity, state.angular_velocity, state.exists)

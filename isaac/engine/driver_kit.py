@@ -46,13 +46,17 @@ class KitFields(NamedTuple):
     clock: np.ndarray  # (1 + len(STAGES),) int64 ns, which only the timed drivers write
 
 
-@structref.register
-class DriverKitType(types.StructRef):
-    """numba's type of a `DriverKit`: one per set of field types (as the driver's signature
-    was one per set of argument types)."""
+class _FieldsType(types.StructRef):
+    """A kit's numba type: one per set of field types (as the driver's signature was one per
+    set of argument types)."""
 
     def preprocess_fields(self, fields):
         return tuple((name, types.unliteral(typ)) for name, typ in fields)
+
+
+@structref.register
+class DriverKitType(_FieldsType):
+    """numba's type of a `DriverKit`."""
 
 
 class DriverKit(structref.StructRefProxy):
@@ -60,11 +64,8 @@ class DriverKit(structref.StructRefProxy):
 
 
 @structref.register
-class BatchKitType(types.StructRef):
+class BatchKitType(_FieldsType):
     """numba's type of a `BatchKit`."""
-
-    def preprocess_fields(self, fields):
-        return tuple((name, types.unliteral(typ)) for name, typ in fields)
 
 
 class BatchKit(structref.StructRefProxy):
