@@ -399,6 +399,31 @@ def test_a_step_whose_rows_outgrow_its_slot_gives_the_staged_steps_bits(monkeypa
     _all_same(_stepped(scene, STEPS), got)
 
 
+def test_a_step_that_outgrows_its_slot_in_one_call_is_taken_again_with_the_same_bits(
+    monkeypatch,
+):
+    from isaac.engine import driver
+
+    original, grown = driver._grown_rows, []
+
+    def counted(batch, need):
+        grown.append(need)
+        return original(batch, need)
+
+    monkeypatch.setattr(driver, "_grown_rows", counted)
+    scene = _pile("accurate")  # 4 sub-steps: some 100 rows a step
+    sim = Simulation(scene)
+    got = [sim.step() for _ in range(STEPS // 2)]
+    stepper = sim._stepper
+    assert stepper.kit is not None  # the next step() is one driver call
+    stepper._slots.clear()  # the next slot is made with room for 16 rows
+    stepper._rows_per_step = 1
+    before = len(grown)
+    got += [sim.step() for _ in range(STEPS - STEPS // 2)]
+    assert grown[before:] and grown[before] > 16  # that call did not fit: undone, taken again
+    _all_same(_stepped(scene, STEPS), got)
+
+
 def test_arrays_a_batch_hands_out_are_never_written_again_after_the_batch_is_dropped():
     """A batch's slot is used again once nothing holds it: not while a caller keeps only an
     array or the row tuple it handed out as it is (`position`, `row_arrays`)."""
