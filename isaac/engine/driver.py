@@ -844,8 +844,8 @@ class Stepper:
         The common case is one driver call and no more: the kit is current (`_current_kit`'s
         and `_fit`'s checks) and the step fits the buffers. A step that does not fit, or
         diverges, is undone by the driver, and `run`'s loop takes it again (growing the
-        buffer, or stopping at the same body). (`run`'s loop and `_into_slot`'s bookkeeping
-        cost 2-3 us a call, a third of a small scene's `step()`.)"""
+        buffer, or stopping at the same body). (Without `run`'s loop and `_into_slot`'s
+        bookkeeping a small scene's `step()` takes 0.2-0.4 us less, of about 6.)"""
         slot = self._free_slot(1)
         kit = self.kit
         if (
@@ -853,7 +853,8 @@ class Stepper:
             and self._kit_table is self.work.solver_table
             and self._sized_for == self.work.a.shape[0]
         ):
-            pose = (state.position, state.angle, state.velocity, state.angular_velocity, state.exists)
+            s = state
+            pose = (s.position, s.angle, s.velocity, s.angular_velocity, s.exists)
             status, _, carried, _, _, _, last_carried = self.kernel(
                 kit, pose, slot.kit, 0, self.carried, state.step, 1, True
             )
