@@ -104,3 +104,32 @@ def test_the_recorders_key_changes_with_any_recorder_file_and_with_the_engine(tm
     pack = copy / "pack.py"
     pack.write_text(pack.read_text() + "\n# an edit\n")
     assert key() != recorder_key.SOURCES_KEY
+
+
+
+class TypeAnOlderEngineHad:
+    """A kernel argument type of an older engine (removed below once pickled)."""
+
+
+def _stale_index(cache_path: Path, stamp):
+    """numba's index file of a kernel at `cache_path`, as an older engine wrote it: its
+    signatures name a type this engine does not define."""
+    import pickle
+
+    from numba.core import caching
+
+    cache_path.mkdir()
+    index = caching.IndexDataCacheFile(str(cache_path), "driver.run_steps-1", stamp)
+    with open(index._index_path, "wb") as f:
+        pickle.dump(index._version, f, protocol=-1)
+        f.write(pickle.dumps((stamp, {(TypeAnOlderEngineHad(),): "data"}), protocol=-1))
+    return index
+
+
+def test_an_index_naming_a_type_this_engine_lacks_is_a_miss_not_a_crash(tmp_path, monkeypatch):
+    keyed = _stale_index(tmp_path / "engine", ((0.0, 1), engine.SOURCES_KEY))
+    other = _stale_index(tmp_path / "other", (0.0, 1))  # another library's kernel
+    monkeypatch.delattr(sys.modules[__name__], "TypeAnOlderEngineHad")
+    assert keyed._load_index() == {}  # a miss: compiled again, and the index written anew
+    with pytest.raises(AttributeError):  # numba's own behaviour, elsewhere
+        other._load_index()

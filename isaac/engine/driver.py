@@ -56,7 +56,7 @@ import numpy as np
 from isaac.engine import kernel_cache  # noqa: F401  (first: keys the kernels' numba cache)
 from isaac.engine.broad_phase import find_pairs, speculative_reach
 from isaac.engine.clock import monotonic_ns
-from isaac.engine.driver_kit import KitFields, make_batch_kit, make_kit
+from isaac.engine.driver_kit import BatchCall, KitFields, make_call_kit, make_kit
 from isaac.engine.geometry import transform
 from isaac.engine.integrate import (
     DIVERGED_ANGLE,
@@ -579,79 +579,85 @@ def _run_steps(
 
 
 @numba.njit(cache=True, nogil=True)
-def run_steps_sequential(kit, pose, batch, start, carried, first, k, record):
+def run_steps_sequential(call, start, carried, first, k, record):
     """Advance the pose by up to k steps from state index `first` with the sequential solver,
     writing the batch from index `start` when `record`.
 
-    kit: the bundles that live as long as the buffers (`isaac.engine.driver_kit`: `Bodies`,
-    `Settings`, `Scratch`, `Carry`, the `Pose` and `Carry` a step is undone to, the solver's
-    table, the clock that only the timed drivers write), one object; pose: a plain tuple of the
-    `Pose` fields; batch: a batch kit (`make_batch_kit`) of the `Batch` fields; carried: how
-    many Carry rows are valid. A scene
-    without joints only (`run_steps_sequential_joints` otherwise): this driver never types,
-    compiles or links the joints' kernels nor the solver's joint passes. Returns (status,
-    steps taken, carried, body, field, pairs, rows or scratch entries needed, carried at the
-    start of the last step): status DONE, or DIVERGED / NEED_PAIRS / NEED_ROWS / NEED_TABLE
-    with the step that did it undone (body, field:
-    `first_diverged`'s). On return the kit's `saved_pose` / `saved_carry` hold the start of the
-    last step taken (or undone), which `Stepper.redo_last` computes again to record it."""
+    call: a call kit (`isaac.engine.driver_kit.make_call_kit`): the driver's kit (the bundles
+    that live as long as the buffers: `Bodies`, `Settings`, `Scratch`, `Carry`, the `Pose` and
+    `Carry` a step is undone to, the solver's table, the clock that only the timed drivers
+    write), the pose (the `Pose` fields, a plain tuple) and the batch (the `Batch` fields);
+    carried: how many Carry rows are valid. A scene without joints only
+    (`run_steps_sequential_joints` otherwise): this driver never types, compiles or links the
+    joints' kernels nor the solver's joint passes. Returns (status, steps taken, carried, body,
+    field, rows or scratch entries needed, carried at the start of the last step): status
+    DONE, or DIVERGED / NEED_PAIRS / NEED_ROWS / NEED_TABLE with the step that did it undone
+    (body, field: `first_diverged`'s). On return the kit's `saved_pose` / `saved_carry` hold
+    the start of the last step taken (or undone), which `Stepper.redo_last` computes again to
+    record it."""
+    kit = call.driver
     return _run_steps(
-        False, False, False, kit.bodies, Settings(*kit.settings), pose, kit.scratch,
-        kit.carry, kit.saved_pose, kit.saved_carry, batch.arrays, kit.table, start, carried,
+        False, False, False, kit.bodies, Settings(*kit.settings), call.pose, kit.scratch,
+        kit.carry, kit.saved_pose, kit.saved_carry, call.arrays, kit.table, start, carried,
         first, k, record, kit.clock,
     )  # fmt: skip
 
 
 @numba.njit(cache=True, nogil=True)
-def run_steps_seed(kit, pose, batch, start, carried, first, k, record):
+def run_steps_seed(call, start, carried, first, k, record):
     """`run_steps_sequential` with the seed's single-pass solver."""
+    kit = call.driver
     return _run_steps(
-        True, False, False, kit.bodies, Settings(*kit.settings), pose, kit.scratch,
-        kit.carry, kit.saved_pose, kit.saved_carry, batch.arrays, kit.table, start, carried,
+        True, False, False, kit.bodies, Settings(*kit.settings), call.pose, kit.scratch,
+        kit.carry, kit.saved_pose, kit.saved_carry, call.arrays, kit.table, start, carried,
         first, k, record, kit.clock,
     )  # fmt: skip
 
 
 @numba.njit(cache=True, nogil=True)
-def run_steps_sequential_timed(kit, pose, batch, start, carried, first, k, record):
+def run_steps_sequential_timed(call, start, carried, first, k, record):
     """`run_steps_sequential` that also adds each stage's time to `clock` (ns: clock[0] the
     whole call, clock[1 + i] stage STAGES[i]); the same bits."""
+    kit = call.driver
     return _run_steps(
-        False, True, False, kit.bodies, Settings(*kit.settings), pose, kit.scratch,
-        kit.carry, kit.saved_pose, kit.saved_carry, batch.arrays, kit.table, start, carried,
+        False, True, False, kit.bodies, Settings(*kit.settings), call.pose, kit.scratch,
+        kit.carry, kit.saved_pose, kit.saved_carry, call.arrays, kit.table, start, carried,
         first, k, record, kit.clock,
     )  # fmt: skip
 
 
 @numba.njit(cache=True, nogil=True)
-def run_steps_seed_timed(kit, pose, batch, start, carried, first, k, record):
+def run_steps_seed_timed(call, start, carried, first, k, record):
     """`run_steps_seed` that also adds each stage's time to `clock`, as
     `run_steps_sequential_timed` does."""
+    kit = call.driver
     return _run_steps(
-        True, True, False, kit.bodies, Settings(*kit.settings), pose, kit.scratch,
-        kit.carry, kit.saved_pose, kit.saved_carry, batch.arrays, kit.table, start, carried,
+        True, True, False, kit.bodies, Settings(*kit.settings), call.pose, kit.scratch,
+        kit.carry, kit.saved_pose, kit.saved_carry, call.arrays, kit.table, start, carried,
         first, k, record, kit.clock,
     )  # fmt: skip
 
 
 @numba.njit(cache=True, nogil=True)
-def run_steps_sequential_joints(kit, pose, batch, start, carried, first, k, record):
+def run_steps_sequential_joints(call, start, carried, first, k, record):
     """`run_steps_sequential` for a scene with joints: the joints' kernels and the solver's
     joint passes (the seed's solver has no joint rows: a scene with joints cannot choose it)."""
+    kit = call.driver
     return _run_steps(
-        False, False, True, kit.bodies, Settings(*kit.settings), pose, kit.scratch,
-        kit.carry, kit.saved_pose, kit.saved_carry, batch.arrays, kit.table, start, carried,
+        False, False, True, kit.bodies, Settings(*kit.settings), call.pose, kit.scratch,
+        kit.carry, kit.saved_pose, kit.saved_carry, call.arrays, kit.table, start, carried,
         first, k, record, kit.clock,
     )  # fmt: skip
 
 
 @numba.njit(cache=True, nogil=True)
-def run_steps_sequential_joints_timed(kit, pose, batch, start, carried, first, k, record):
+def run_steps_sequential_joints_timed(call, start, carried, first, k, record):
     """`run_steps_sequential_joints` that also adds each stage's time to `clock`, as
     `run_steps_sequential_timed` does."""
+    kit = call.driver
     return _run_steps(
-        False, True, True, kit.bodies, Settings(*kit.settings), pose, kit.scratch,
-        kit.carry, kit.saved_pose, kit.saved_carry, batch.arrays, kit.table, start, carried,
+        False, True, True, kit.bodies, Settings(*kit.settings), call.pose, kit.scratch,
+        kit.carry, kit.saved_pose, kit.saved_carry, call.arrays, kit.table, start, carried,
         first, k, record, kit.clock,
     )  # fmt: skip
 
@@ -730,8 +736,8 @@ class Stepper:
         self._last_start = None  # (state index, carried) of the saved pose and carry, or None
         self._empty_saved()
         self._fit()
-        self._empty_batch = self.new_batch(0, 0)  # what an unrecorded call writes nothing into
-        self._empty_batch_kit = None  # its kit, made at the first unrecorded call
+        # what an unrecorded call writes nothing into, with its call kit
+        self._empty_call = BatchCall(self.new_batch(0, 0))
         self._slots: list[StepSlot] = []  # `recorded`'s, the most recently used last
         self._rows_per_step = 4 * self.n  # first guess at a batch's contact rows per step
 
@@ -853,10 +859,8 @@ class Stepper:
             and self._kit_table is self.work.solver_table
             and self._sized_for == self.work.a.shape[0]
         ):
-            s = state
-            pose = (s.position, s.angle, s.velocity, s.angular_velocity, s.exists)
             status, _, carried, _, _, _, last_carried = self.kernel(
-                kit, pose, slot.kit, 0, self.carried, state.step, 1, True
+                slot.call.kit(kit, state), 0, self.carried, state.step, 1, True
             )
             if status == DONE:
                 self.carried = carried
@@ -878,7 +882,7 @@ class Stepper:
         """Up to k steps recorded into a free slot: (the slot, or None when the rows outgrew it
         and `arrays` are grown ones; steps taken; body; field; arrays)."""
         slot = self._free_slot(k)
-        taken, body, field, arrays = self.run(state, k, slot.arrays, slot.kit)
+        taken, body, field, arrays = self.run(state, k, slot.arrays, slot.call)
         self._slots.remove(slot)
         if arrays is slot.arrays:
             self._slots.append(slot)  # the most recently used, last
@@ -900,34 +904,31 @@ class Stepper:
         # pile come and go from step to step (a slot they outgrow is made again), and a batch of
         # many steps evens them out
         rows = max(16, self._rows_per_step * steps + self._rows_per_step // 2)
-        slot = StepSlot(self.new_batch(steps, rows), self.dt, make_batch_kit)
+        slot = StepSlot(self.new_batch(steps, rows), self.dt, BatchCall)
         self._slots.append(slot)
         del self._slots[:-SPARE_BATCHES]
         return slot
 
     def run(
-        self, state, k: int, batch: tuple | None, batch_kit=None
+        self, state, k: int, batch: tuple | None, call: BatchCall | None = None
     ) -> tuple[int, int, int, tuple | None]:
         """Advance `state` (an `isaac.engine.world.State`) by up to k steps, recording into
-        `batch` when it is given (from `new_batch(k)`; batch_kit: its kit when the caller holds
-        one, a `StepSlot`'s). Returns (steps taken, diverged body or -1, field code, the batch,
-        possibly grown, or None). The loop grows a buffer and calls again when a step did not
-        fit."""
+        `batch` when it is given (from `new_batch(k)`; call: its `BatchCall` when the caller
+        holds one, a `StepSlot`'s). Returns (steps taken, diverged body or -1, field code, the
+        batch, possibly grown, or None). The loop grows a buffer and calls again when a step did
+        not fit."""
         self._fit()  # `Simulation.detect` may have grown the workspace
         record = batch is not None
         if batch is None:
-            if self._empty_batch_kit is None:
-                self._empty_batch_kit = make_batch_kit(self._empty_batch)
-            batch, batch_kit = self._empty_batch, self._empty_batch_kit
-        elif batch_kit is None:
-            batch_kit = make_batch_kit(batch)
-        pose = (state.position, state.angle, state.velocity, state.angular_velocity, state.exists)
+            call = self._empty_call
+        elif call is None:
+            call = BatchCall(batch)
         self._last_start = None
         taken = 0
         while True:
             status, done, carried, body, field, need, last_carried = self.kernel(
-                self._current_kit(), pose, batch_kit, taken, self.carried, state.step, k - taken,
-                record,
+                call.kit(self._current_kit(), state), taken, self.carried, state.step,
+                k - taken, record,
             )  # fmt: skip
             self.carried = carried
             state.step += done
@@ -939,7 +940,7 @@ class Stepper:
                 self._fit()
             elif status == NEED_ROWS:
                 batch = _grown_rows(batch, need)
-                batch_kit = make_batch_kit(batch)
+                call = BatchCall(batch)
             elif status == NEED_TABLE:
                 self.work.solver_table = grown_scratch(self.work.solver_table, need)
             else:
@@ -970,7 +971,7 @@ class Stepper:
             # (a step taken again is not the run's time: a clock of its own)
             kit = self._kit(carry, spare_pose, spare_carry, np.zeros_like(self.clock))
             status, _, _, _, _, need, _ = self.kernel(
-                kit, pose, make_batch_kit(batch), 0, carried, first, 1, True
+                make_call_kit(batch, kit, pose), 0, carried, first, 1, True
             )
             if status == NEED_ROWS:
                 batch = _grown_rows(batch, need)

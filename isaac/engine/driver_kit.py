@@ -7,12 +7,14 @@ types each array and wraps it in a fresh reference-counted handle on every call:
 on pile-100, more than a fifth of a step, which is why `Simulation.step()` once took the staged
 path (eight smaller crossings, with their own Python) rather than a one-step driver call. A
 `DriverKit` holds those handles, made once (`make_kit`), and a call unboxes it as one pointer.
-A batch's 28 arrays go the same way (`BatchKit`, `make_batch_kit`: 6 us to make, once a batch
-or a `StepSlot`, against some 3.5 us a call as a tuple). A call with both and the pose (a
-tuple of 5 arrays) crosses in 2.7 us.
+A call's kit (`CallKit`, `make_call_kit`: 6 us to make) holds the driver's kit, the pose (the
+state's 5 arrays) and the batch the call writes (28 arrays, some 3.5 us a call as a tuple), so
+a call crosses with one object and five integers: 0.7 us, where the driver's kit, the pose and
+a batch's kit as three arguments took 1.6 us (numba types each object argument in Python).
+`BatchCall` keeps a batch's call kit and makes it again when the driver's kit or the pose it
+holds was replaced.
 
 Every field is replaced as a whole (a new kit) when a buffer grows, never written from Python.
-The pose stays a separate argument: `Simulation.resume` replaces `State`'s arrays.
 
 With NUMBA_DISABLE_JIT=1 there is no compiled code to cross into: a kit is a plain named tuple
 with the same fields, which the drivers, then plain Python, read alike.
@@ -64,31 +66,32 @@ class DriverKit(structref.StructRefProxy):
 
 
 @structref.register
-class BatchKitType(_FieldsType):
-    """numba's type of a `BatchKit`."""
+class CallKitType(_FieldsType):
+    """numba's type of a `CallKit`."""
 
 
-class BatchKit(structref.StructRefProxy):
-    """A batch (`isaac.engine.driver.Batch`'s fields as a plain tuple, `arrays`) held by
-    compiled code: 28 arrays that would cost some 3.5 us a call to hand over as a tuple."""
+class CallKit(structref.StructRefProxy):
+    """What a driver call takes, held by compiled code: a `CallFields`."""
 
 
 structref.define_boxing(DriverKitType, DriverKit)
-structref.define_boxing(BatchKitType, BatchKit)
+structref.define_boxing(CallKitType, CallKit)
 
 
-class BatchFields(NamedTuple):
-    """What a batch kit holds (the reference path's batch kit itself)."""
+class CallFields(NamedTuple):
+    """What a call's kit holds (the reference path's call kit itself)."""
 
-    arrays: tuple
+    arrays: tuple  # the batch the call writes: `isaac.engine.driver.Batch`'s fields, in order
+    driver: object  # the `DriverKit` (`make_kit`)
+    pose: tuple  # the state's `isaac.engine.driver.Pose` fields, which the call advances
 
 
 def _driver_kit(bodies, settings, scratch, carry, saved_pose, saved_carry, table, clock):
     """A `DriverKit` of these fields (compiled code only: typed by the overload below)."""
 
 
-def _batch_kit(arrays):
-    """A `BatchKit` of a batch's arrays (compiled code only: typed by the overload below)."""
+def _call_kit(arrays, driver, pose):
+    """A `CallKit` of these fields (compiled code only: typed by the overload below)."""
 
 
 # The kit's type is made from the argument types while numba types the call, so the compiled
@@ -119,13 +122,15 @@ def _driver_kit_typed(bodies, settings, scratch, carry, saved_pose, saved_carry,
     return make
 
 
-@overload(_batch_kit)
-def _batch_kit_typed(arrays):
-    kit_type = BatchKitType([("arrays", arrays)])
+@overload(_call_kit)
+def _call_kit_typed(arrays, driver, pose):
+    kit_type = CallKitType([("arrays", arrays), ("driver", driver), ("pose", pose)])
 
-    def make(arrays):
+    def make(arrays, driver, pose):
         kit = structref.new(kit_type)
         kit.arrays = arrays
+        kit.driver = driver
+        kit.pose = pose
         return kit
 
     return make
@@ -137,8 +142,8 @@ def _new_driver_kit(bodies, settings, scratch, carry, saved_pose, saved_carry, t
 
 
 @numba.njit(cache=True)
-def _new_batch_kit(arrays):
-    return _batch_kit(arrays)
+def _new_call_kit(arrays, driver, pose):
+    return _call_kit(arrays, driver, pose)
 
 
 def make_kit(fields: KitFields):
@@ -149,9 +154,42 @@ def make_kit(fields: KitFields):
     return _new_driver_kit(*fields)
 
 
-def make_batch_kit(arrays: tuple):
-    """The batch a driver call takes: a `BatchKit` holding `arrays` (`Batch`'s fields, in
-    order), or a `BatchFields` on the reference path."""
+def make_call_kit(arrays: tuple, driver, pose: tuple):
+    """What a driver call takes: a `CallKit` holding the batch it writes (`arrays`: `Batch`'s
+    fields, in order), the driver's kit (`make_kit`) and the pose it advances (`Pose`'s
+    fields, the state's arrays), or a `CallFields` on the reference path."""
     if numba.config.DISABLE_JIT:
-        return BatchFields(arrays)
-    return _new_batch_kit(arrays)
+        return CallFields(arrays, driver, pose)
+    return _new_call_kit(arrays, driver, pose)
+
+
+class BatchCall:
+    """A batch's arrays and its call kit (`make_call_kit`), made again when the driver's kit or
+    the pose it holds is not the one given (a buffer grew, or the state's arrays were replaced:
+    `Simulation.resume`, or a user's assignment), else the same object, call after call."""
+
+    __slots__ = ("arrays", "_kit", "_driver", "_pose")
+
+    def __init__(self, arrays: tuple) -> None:
+        self.arrays = arrays
+        self._kit = None
+        self._driver = None
+        self._pose = None
+
+    def kit(self, driver, state):
+        """The call kit of this batch with `driver` (a `DriverKit`) and `state`'s arrays (an
+        `isaac.engine.world.State`)."""
+        p = self._pose
+        if (
+            self._driver is not driver
+            or p[0] is not state.position
+            or p[1] is not state.angle
+            or p[2] is not state.velocity
+            or p[3] is not state.angular_velocity
+            or p[4] is not state.exists
+        ):
+            s = state
+            self._pose = (s.position, s.angle, s.velocity, s.angular_velocity, s.exists)
+            self._driver = driver
+            self._kit = make_call_kit(self.arrays, driver, self._pose)
+        return self._kit

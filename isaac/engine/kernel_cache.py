@@ -7,6 +7,11 @@ old physics (compiled and pure-Python runs disagreed at step 16 until the cache 
 The locators installed here are numba's own (NUMBA_CACHE_DIR, then the in-tree __pycache__),
 for isaac's files only, with `SOURCES_KEY` added to the source stamp numba compares.
 (Not in isaac/engine/__init__: importing the records alone must not load numba.)
+
+A cache index that no longer loads is a miss, not a crash (`_tolerate_stale_indexes`): numba
+unpickles an index's signatures before it compares its stamp, and the index an older engine
+wrote names the types it had (a renamed kernel argument type made every later run in that tree
+fail with an AttributeError).
 """
 
 from __future__ import annotations
@@ -71,7 +76,38 @@ def key_kernel_caches(root, key: str, label: str) -> str:
             keyed(caching.UserProvidedCacheLocator),
             keyed(caching.InTreeCacheLocator),
         ]
+    _KEYS.add(key)
+    _tolerate_stale_indexes(caching)
     return key
+
+
+_KEYS: set[str] = set()  # the keys of the caches keyed here (`key_kernel_caches`)
+
+
+def _tolerate_stale_indexes(caching) -> None:
+    """Make numba's index of a kernel keyed here read as empty (a miss: the kernel compiles and
+    its index is written again) when it does not unpickle, e.g. because it names a type an
+    older engine defined and this one does not; any other cache's index loads as numba loads
+    it (once a process)."""
+    import pickle
+
+    index_file = caching.IndexDataCacheFile
+    if getattr(index_file._load_index, "isaac_tolerant", False):
+        return
+    load = index_file._load_index
+    unreadable = (pickle.UnpicklingError, AttributeError, ImportError, EOFError, TypeError)
+
+    def _load_index(self):
+        try:
+            return load(self)
+        except unreadable:
+            stamp = self._source_stamp
+            if not (isinstance(stamp, tuple) and stamp and stamp[-1] in _KEYS):
+                raise
+            return {}
+
+    _load_index.isaac_tolerant = True
+    index_file._load_index = _load_index
 
 
 def _key_kernel_caches() -> str:

@@ -5,10 +5,11 @@ A batch handed out must stay as it was, whatever steps come after. A fresh batch
 arrays, whose pages the kernel zeroes on first write), or a reused batch of plain arrays (28
 reference counts to read, 56 write flags to turn, a `StepBatch` to make), cost 12-20 us of
 Python a call on pile-100: a quarter of a step for `step()`. A slot's 28 arrays are views of one
-block of memory, made once, with their kit for the driver and the `StepBatch` of read-only views
-that hands them out. So two reference counts say whether anything still holds the slot: the
-`StepBatch`'s (the batch, or a record of it) and the block's (any array taken from them, which
-numpy makes a view of the block). A slot in use is never written; another is taken or made.
+block of memory, made once, with what hands them to the driver (a `BatchCall`) and the
+`StepBatch` of read-only views that hands them out. So two reference counts say whether
+anything still holds the slot: the `StepBatch`'s (the batch, or a record of it) and the
+block's (any array taken from them, which numpy makes a view of the block). A slot in use is
+never written; another is taken or made.
 """
 
 from __future__ import annotations
@@ -26,10 +27,10 @@ class StepSlot:
     """A batch whose arrays are views of one block (`isaac.engine.driver.Batch`'s fields, in
     order)."""
 
-    def __init__(self, template: tuple, dt: float, kit_of) -> None:
+    def __init__(self, template: tuple, dt: float, call_of) -> None:
         """template: a batch (`Stepper.new_batch(steps)`) whose shapes and dtypes the slot's
-        arrays take; dt: the step (s); kit_of: what makes the arrays' batch kit for the driver
-        (`isaac.engine.driver_kit.make_batch_kit`)."""
+        arrays take; dt: the step (s); call_of: what hands the arrays to the driver
+        (`isaac.engine.driver_kit.BatchCall`)."""
         sizes = [-(-a.nbytes // _ALIGN) * _ALIGN for a in template]
         self._block = np.empty(max(1, sum(sizes)), dtype=np.uint8)
         arrays, at = [], 0
@@ -38,7 +39,7 @@ class StepSlot:
             at += size
         arrays[5][:] = 0  # the offsets: a call's rows start at row 0 (the driver writes [1:])
         self.arrays = tuple(arrays)  # what the driver writes
-        self.kit = kit_of(self.arrays)  # (made once: 6 us)
+        self.call = call_of(self.arrays)  # (its kit made at the first call: 6 us)
         self.steps = self.arrays[0].shape[0]  # room for this many steps
         self._views = tuple(a.view() for a in arrays)  # (StepBatch makes them read-only)
         self._batch = StepBatch(0, dt, self._views, self.steps)
