@@ -424,6 +424,20 @@ def test_a_step_that_outgrows_its_slot_in_one_call_is_taken_again_with_the_same_
     _all_same(_stepped(scene, STEPS), got)
 
 
+def test_state_arrays_replaced_between_steps_are_the_ones_the_next_step_advances():
+    scene = _pile("balanced")
+    sim, staged = Simulation(scene), Simulation(scene, staged=True)
+    for _ in range(5):
+        sim.step(), staged.step()
+    for s in (sim, staged):  # a user's assignment of new arrays (a kick upwards)
+        s.state.velocity = s.state.velocity + np.array([0.0, 2.0])
+        s.state.position = s.state.position.copy()
+    moved = sim.state.position
+    got, want = [sim.step() for _ in range(5)], [staged.step() for _ in range(5)]
+    assert sim.state.position is moved and np.array_equal(moved, want[-1].position)
+    _all_same(want, got)
+
+
 def test_arrays_a_batch_hands_out_are_never_written_again_after_the_batch_is_dropped():
     """A batch's slot is used again once nothing holds it: not while a caller keeps only an
     array or the row tuple it handed out as it is (`position`, `row_arrays`)."""
