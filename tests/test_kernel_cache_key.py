@@ -106,7 +106,6 @@ def test_the_recorders_key_changes_with_any_recorder_file_and_with_the_engine(tm
     assert key() != recorder_key.SOURCES_KEY
 
 
-
 class TypeAnOlderEngineHad:
     """A kernel argument type of an older engine (removed below once pickled)."""
 
