@@ -40,6 +40,10 @@ wraps ``CPUCodeLibrary._unserialize`` and ``numba.core.environment._rebuild_env`
 above; it leaves numba as it is when those are not the ones it knows (another numba version)
 and ``ISAAC_EAGER_KERNEL_LOADING=1`` turns all three off. Imported by
 `isaac.engine.kernel_cache`, before any kernel of the engine or the recorder is loaded.
+
+`tolerate_stale_indexes` (installed by `isaac.engine.kernel_cache` for the caches it keys, with
+or without the above) makes a cache index an older engine wrote, naming types this one lacks,
+a miss instead of an AttributeError at every run.
 """
 
 from __future__ import annotations
@@ -323,3 +327,34 @@ def _install_plain_ndarray_typeof() -> bool:
 
 
 LAZY = install()
+
+
+def tolerate_stale_indexes(keys) -> None:
+    """Make numba's index of a kernel whose cache is keyed by one of `keys` (the collection
+    `isaac.engine.kernel_cache` fills; a keyed stamp ends with its key) read as empty when it
+    does not unpickle: a miss, so the kernel compiles and its index is written anew. numba
+    unpickles an index's signatures before it compares its stamp, and the index an older engine
+    wrote names the types it had (a renamed kernel argument type made every later run in that
+    tree fail with an AttributeError). Any other cache's index loads as numba loads it. Once a
+    process; whatever ISAAC_EAGER_KERNEL_LOADING says (it is not about the loading's speed)."""
+    import pickle
+
+    from numba.core import caching
+
+    index_file = caching.IndexDataCacheFile
+    if getattr(index_file._load_index, "isaac_tolerant", False):
+        return
+    load = index_file._load_index
+    unreadable = (pickle.UnpicklingError, AttributeError, ImportError, EOFError, TypeError)
+
+    def _load_index(self):
+        try:
+            return load(self)
+        except unreadable:
+            stamp = self._source_stamp
+            if not (isinstance(stamp, tuple) and stamp and stamp[-1] in keys):
+                raise
+            return {}
+
+    _load_index.isaac_tolerant = True
+    index_file._load_index = _load_index

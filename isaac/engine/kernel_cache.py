@@ -8,15 +8,13 @@ The locators installed here are numba's own (NUMBA_CACHE_DIR, then the in-tree _
 for isaac's files only, with `SOURCES_KEY` added to the source stamp numba compares.
 (Not in isaac/engine/__init__: importing the records alone must not load numba.)
 
-A cache index that no longer loads is a miss, not a crash (`_tolerate_stale_indexes`): numba
-unpickles an index's signatures before it compares its stamp, and the index an older engine
-wrote names the types it had (a renamed kernel argument type made every later run in that tree
-fail with an AttributeError).
+A cache index keyed here that no longer loads is a miss, not a crash
+(`isaac.kernel_loading.tolerate_stale_indexes`).
 """
 
 from __future__ import annotations
 
-from isaac import kernel_loading  # noqa: F401  (cached kernels load without numba's compiler)
+from isaac import kernel_loading  # (first: cached kernels load without numba's compiler)
 
 
 def files_key(root, paths, seed: str = "") -> str:
@@ -77,37 +75,11 @@ def key_kernel_caches(root, key: str, label: str) -> str:
             keyed(caching.InTreeCacheLocator),
         ]
     _KEYS.add(key)
-    _tolerate_stale_indexes(caching)
+    kernel_loading.tolerate_stale_indexes(_KEYS)
     return key
 
 
 _KEYS: set[str] = set()  # the keys of the caches keyed here (`key_kernel_caches`)
-
-
-def _tolerate_stale_indexes(caching) -> None:
-    """Make numba's index of a kernel keyed here read as empty (a miss: the kernel compiles and
-    its index is written again) when it does not unpickle, e.g. because it names a type an
-    older engine defined and this one does not; any other cache's index loads as numba loads
-    it (once a process)."""
-    import pickle
-
-    index_file = caching.IndexDataCacheFile
-    if getattr(index_file._load_index, "isaac_tolerant", False):
-        return
-    load = index_file._load_index
-    unreadable = (pickle.UnpicklingError, AttributeError, ImportError, EOFError, TypeError)
-
-    def _load_index(self):
-        try:
-            return load(self)
-        except unreadable:
-            stamp = self._source_stamp
-            if not (isinstance(stamp, tuple) and stamp and stamp[-1] in _KEYS):
-                raise
-            return {}
-
-    _load_index.isaac_tolerant = True
-    index_file._load_index = _load_index
 
 
 def _key_kernel_caches() -> str:
