@@ -381,7 +381,9 @@ def test_step_writes_into_the_same_few_slots_when_no_record_is_held():
     assert not sim.step().position.flags.writeable
 
 
-def test_a_step_whose_rows_outgrow_its_slot_gives_the_staged_steps_bits(monkeypatch):
+@pytest.fixture
+def grown_rows(monkeypatch) -> list[int]:
+    """The rows asked for each time a batch grew (`isaac.engine.driver._grown_rows`)."""
     from isaac.engine import driver
 
     original, grown = driver._grown_rows, []
@@ -391,6 +393,11 @@ def test_a_step_whose_rows_outgrow_its_slot_gives_the_staged_steps_bits(monkeypa
         return original(batch, need)
 
     monkeypatch.setattr(driver, "_grown_rows", counted)
+    return grown
+
+
+def test_a_step_whose_rows_outgrow_its_slot_gives_the_staged_steps_bits(grown_rows):
+    grown = grown_rows
     scene = _pile("accurate")  # 4 sub-steps: some 100 rows a step
     sim = Simulation(scene)
     sim._stepper._rows_per_step = 1  # the first slot has room for 16 rows
@@ -400,17 +407,9 @@ def test_a_step_whose_rows_outgrow_its_slot_gives_the_staged_steps_bits(monkeypa
 
 
 def test_a_step_that_outgrows_its_slot_in_one_call_is_taken_again_with_the_same_bits(
-    monkeypatch,
+    grown_rows,
 ):
-    from isaac.engine import driver
-
-    original, grown = driver._grown_rows, []
-
-    def counted(batch, need):
-        grown.append(need)
-        return original(batch, need)
-
-    monkeypatch.setattr(driver, "_grown_rows", counted)
+    grown = grown_rows
     scene = _pile("accurate")  # 4 sub-steps: some 100 rows a step
     sim = Simulation(scene)
     got = [sim.step() for _ in range(STEPS // 2)]
