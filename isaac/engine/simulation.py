@@ -227,7 +227,7 @@ class Simulation:
         return self._step_driver
 
     def _driven_step(self) -> StepRecord:
-        """One step in one driver call (two kits and the pose cross into compiled code: see
+        """One step in one driver call (one object crosses into compiled code: see
         `isaac.engine.driver_kit`); its record holds a slot's arrays, as `run`'s do."""
         self._to_driver()
         last, body, field = self._stepper.one_step(self.state)
