@@ -9,7 +9,9 @@ block of memory, made once, with what hands them to the driver (a `BatchCall`) a
 `StepBatch` of read-only views that hands them out. So two reference counts say whether
 anything still holds the slot: the `StepBatch`'s (the batch, or a record of it) and the
 block's (any array taken from them, which numpy makes a view of the block). A slot in use is
-never written; another is taken or made.
+never written where it handed something out: another is taken or made, or `Stepper.one_step`
+records its next step in the place after the last record it handed out from it (a caller that
+keeps every record holds every slot).
 """
 
 from __future__ import annotations
@@ -54,6 +56,10 @@ class StepSlot:
         self._idle = self._references()
         self._idle_handed = self._handed_references()
         self._lent = False  # whether the batch itself went out (`batch`), not only a record
+        # the place `Stepper.one_step` may record in while the slot is held: after the last
+        # record it handed out from here (a slot `recorded` fills: none)
+        self.next_place = self.steps
+        self.handed = 0  # records handed out since a step was recorded in place 0
 
     def _references(self) -> tuple[int, int]:
         return sys.getrefcount(self._batch), sys.getrefcount(self._block)
@@ -78,9 +84,18 @@ class StepSlot:
             return self._batch
         return StepBatch(first, self._dt, tuple(a.view() for a in self._views), steps)
 
-    def record(self, first: int) -> StepRecord:
-        """The record of the one step just written, as step `first` (its arrays are views made
-        when first read, which hold the block; the batch itself stays in the slot)."""
+    def record(self, step: int, at: int) -> StepRecord:
+        """The record of the step just written at place `at`, as step `step` (its arrays are
+        views made when first read, which hold the block; the batch itself stays in the slot).
+        `Stepper.one_step` writes the places after those of records still held, never theirs."""
         self._lent = False
-        self._batch.first = first
-        return self._batch.record(0)
+        self.handed = self.handed + 1 if at else 1
+        self._batch.first = step - at
+        return self._batch.record(at)
+
+    def records_held(self) -> int:
+        """How many records of this slot something holds (each holds the slot's batch)."""
+        return sys.getrefcount(self._batch) - self._idle[0]
+
+    def bytes_per_step(self) -> int:
+        return -(-self._block.nbytes // self.steps)
