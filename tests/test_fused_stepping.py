@@ -517,3 +517,23 @@ def test_replace_on_a_record_of_a_batch_gives_a_plain_step_record():
     changed = dataclasses.replace(record, velocity=still)
     assert type(changed) is StepRecord and changed.step == record.step
     assert changed.velocity is still and changed.position is record.position
+
+
+def test_detect_between_driven_steps_finds_the_staged_contacts_and_changes_no_bit():
+    """`detect()` reads the last step's contacts where the driver keeps them (hysteresis):
+    the contacts a staged simulation finds at the same state, and the steps after it keep
+    their bits."""
+    scene = SCENES["pile-balanced"]()
+    driven, staged = Simulation(scene), Simulation(scene, staged=True)
+    got, expected, rows = [], [], 0
+    for _ in range(STEPS):
+        got.append(driven.step())
+        expected.append(staged.step())
+        assert driven._step_driver  # (the driver's carry, not a copy taken out of it)
+        found, want = driven.detect(), staged.detect()
+        assert len(want) == len(found)
+        for f in CONTACT_FIELDS:
+            assert getattr(found, f).tobytes() == getattr(want, f).tobytes(), f
+        rows += len(found)
+    assert rows > 0
+    _all_same(expected, got)

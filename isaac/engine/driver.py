@@ -800,9 +800,12 @@ class Stepper:
         self.carry[-1][:] = cache.joints
         self.carried = m
 
-    def cache_arrays(self) -> tuple:
-        """Copies of the valid Carry rows: (key, feature, slot, impulse, tangent, joints)."""
+    def cache_arrays(self, *, copy: bool = True) -> tuple:
+        """The valid Carry rows: (key, feature, slot, impulse, tangent, joints); copies, or
+        views for a reader that writes nothing and is done before the next call."""
         m = self.carried
+        if not copy:
+            return (*(a[:m] for a in self.carry[:-1]), self.carry[-1])
         return (*(a[:m].copy() for a in self.carry[:-1]), self.carry[-1].copy())
 
     def new_batch(self, k: int, rows: int | None = None) -> tuple:
