@@ -828,23 +828,26 @@ class Stepper:
         )  # fmt: skip
 
     def recorded(self, state, k: int) -> tuple[StepBatch | None, int, int]:
-        """Advance `state` by up to k steps, recorded into a free `StepSlot` with room for k
-        (`Simulation.run` and `batches`). Returns (the batch of the steps taken, or None when
-        the first diverged and was undone; body or -1; field code).
+        """Advance `state` by up to k steps, recorded into a `StepSlot` (`Simulation.run` and
+        `batches`). Returns (the batch of the steps taken, or None when the first diverged and
+        was undone; body or -1; field code).
 
         Why slots: a batch's arrays made afresh come from the kernel as pages it zeroes on first
         write (pile-100 `run` 86-88 us a step against 73-75 in reused arrays), and reusing a
         batch of tuples cost 12-20 us of Python a call (28 reference counts, 56 write flags, a
         `StepBatch`). A slot is reused once its reference counts say nothing holds it, and the
         most recently used free one is taken: the one still in the cache (pile-100 `run`, 16
-        steps a batch: 69-70 us a step against 75-79 cycling through three)."""
-        slot, taken, body, field, arrays = self._into_slot(state, k)
+        steps a batch: 69-70 us a step against 75-79 cycling through three). When none is
+        free, the batch goes in the places after the last one handed out (`_held_slot`)."""
+        slot, at = self._slot_for(k)
+        taken, body, field, arrays = self.run(state, k, slot.arrays, slot.call, start=at)
         if not taken:
             return None, body, field
         first = state.step - taken + 1
-        if slot is None:
-            return StepBatch(first, self.dt, arrays, taken), body, field
-        return slot.batch(first, taken), body, field
+        if self._used(slot, arrays, at + taken) is None:  # its rows outgrew the slot
+            return StepBatch.of_places(first, self.dt, arrays, at, taken), body, field
+        slot.next_place = at + taken
+        return slot.batch(first, taken, at), body, field
 
     def one_step(self, state) -> tuple[StepRecord | None, int, int]:
         """Advance `state` by one step, recorded into a slot (`Simulation.step()`). Returns
@@ -861,7 +864,7 @@ class Stepper:
                 at = 0
                 break
         else:
-            slot, at = self._held_slot()
+            slot, at = self._held_slot(1)
         self._fit()  # `Simulation.detect` may have grown the workspace
         if self._call(state, slot.call, at, 1, True)[0] == DONE:
             arrays = slot.arrays
@@ -874,33 +877,36 @@ class Stepper:
         slot.next_place = at + 1
         return slot.record(state.step, at), -1, -1
 
-    def _held_slot(self) -> tuple[StepSlot, int]:
-        """Where `one_step` records when no slot is free: (slot, the step's place in it).
+    def _slot_for(self, k: int) -> tuple[StepSlot, int]:
+        """Where `recorded` writes k steps: (slot, the first step's place in it). The most
+        recently used slot with room for k that nothing holds, else `_held_slot`'s."""
+        for slot in reversed(self._slots):
+            if slot.steps >= k and slot.free():
+                return slot, 0
+        return self._held_slot(k)
 
-        The place after the last record handed out from the last slot made here, while it has
-        room: a caller that keeps every record (`[sim.step() for _ in range(n)]`) holds every
-        slot, and a slot made a step cost 43 us (head-on `step()` 61 us against 4.8). The
-        records already handed out are the places before it, which it never writes. Else a new
-        slot, with room for twice the steps of the last one while every record handed out from
-        that one is still held (up to `_APPEND_BYTES`), else for one: a caller that keeps one
-        record in ten pins no more than about twice what it keeps."""
-        held, steps = self._held, 1
+    def _held_slot(self, k: int) -> tuple[StepSlot, int]:
+        """Where k steps go when no slot is free: (slot, the first step's place in it).
+
+        The places after the last record or batch handed out from the last slot made here,
+        while it has room: a caller that keeps everything (`[sim.step() for _ in range(n)]`,
+        `list(sim.run(n))`) holds every slot, and a slot made a step cost 43 us (head-on
+        `step()` 61 us against 4.8; `run` 4.6 against 2.0). What was handed out is the places
+        before them, which are never written again. Else a new slot, with room for k rounded up
+        to a power of two (a run's batches come in few sizes: a bench's warm-up `run(60)` then
+        serves its timed `run(240)`'s batches of 64), or for twice the steps of the last one
+        while everything handed out from that one is still held (up to `_APPEND_BYTES`): a
+        caller that keeps one record or batch in two, three or ten pins at most about twice
+        what it keeps."""
+        held, steps = self._held, 1 << (k - 1).bit_length()
         if held is not None:
-            if held.next_place < held.steps:
+            if held.next_place + k <= held.steps:
                 return held, held.next_place
             if held.records_held() >= held.handed:
                 room = max(1, _APPEND_BYTES // held.bytes_per_step())
-                steps = min(2 * held.steps, 1 << (room.bit_length() - 1))
+                steps = max(steps, min(2 * held.steps, 1 << (room.bit_length() - 1)))
         self._held = self._new_slot(steps)
         return self._held, 0
-
-    def _into_slot(self, state, k: int):
-        """Up to k steps recorded into a free slot: (the slot, or None when the rows outgrew it
-        and `arrays` are grown ones; steps taken; body; field; arrays)."""
-        slot = self._free_slot(k)
-        slot.next_place = slot.steps  # (a batch handed out is never filled further)
-        taken, body, field, arrays = self.run(state, k, slot.arrays, slot.call)
-        return self._used(slot, arrays, taken), taken, body, field, arrays
 
     def _used(self, slot: StepSlot, arrays: tuple, end: int) -> StepSlot | None:
         """After a call that recorded into `arrays`, `slot`'s or grown ones, up to place `end`:
@@ -919,15 +925,6 @@ class Stepper:
         if end:  # (a slot's rows start at row 0)
             self._rows_per_step = max(4, -(-int(arrays[5][end]) // end))
         return slot
-
-    def _free_slot(self, k: int) -> StepSlot:
-        """The most recently used slot with room for k steps that nothing holds, or a new one
-        with room for k rounded up to a power of two (so that a run's batches come in few sizes:
-        a bench's warm-up `run(60)` then serves its timed `run(240)`'s batches of 64)."""
-        for slot in reversed(self._slots):
-            if slot.steps >= k and slot.free():
-                return slot
-        return self._new_slot(1 << (k - 1).bit_length())
 
     def _new_slot(self, steps: int) -> StepSlot:
         # room for the rows the last call's steps had, and half a step's more: the rows of a

@@ -228,6 +228,25 @@ class StepBatch:
     def __len__(self) -> int:
         return self.steps
 
+    @staticmethod
+    def of_places(first: int, dt: float, arrays: tuple, at: int, steps: int) -> StepBatch:
+        """The batch of places at .. at + steps - 1 of a batch's arrays (`Batch`'s fields, the
+        first step's rows from offsets[at]): views, with the offsets counted from its own first
+        row, which its row arrays start at."""
+        if at == 0:
+            return StepBatch(first, dt, arrays, steps)
+        offsets = arrays[5][at : at + steps + 1]
+        lo, hi = int(offsets[0]), int(offsets[-1])
+        end = 6 + len(CONTACT_FIELDS)
+        return StepBatch(
+            first, dt,
+            (
+                *(a[at : at + steps] for a in arrays[:5]), offsets - lo,
+                *(a[lo:hi] for a in arrays[6:end]), *(a[at : at + steps] for a in arrays[end:]),
+            ),
+            steps,
+        )  # fmt: skip
+
     def contacts_of(self, s: int) -> Contacts:
         lo, hi = int(self.offsets[s]), int(self.offsets[s + 1])
         return Contacts(*(a[lo:hi] for a in self._rows))

@@ -59,7 +59,7 @@ class StepSlot:
         # the place `Stepper.one_step` may record in while the slot is held: after the last
         # record it handed out from here (a slot `recorded` fills: none)
         self.next_place = self.steps
-        self.handed = 0  # records handed out since a step was recorded in place 0
+        self.handed = 0  # records and batches handed out since a step was recorded in place 0
 
     def _references(self) -> tuple[int, int]:
         return sys.getrefcount(self._batch), sys.getrefcount(self._block)
@@ -75,14 +75,19 @@ class StepSlot:
             return False
         return not self._lent or self._handed_references() == self._idle_handed
 
-    def batch(self, first: int, steps: int) -> StepBatch:
-        """The batch of the `steps` steps just written, the first of them step `first`: the
-        slot's own `StepBatch` when they fill it, else one over new views of the block."""
-        self._lent = True
-        if steps == self.steps:
+    def batch(self, first: int, steps: int, at: int = 0) -> StepBatch:
+        """The batch of the `steps` steps just written from place `at`, the first of them step
+        `first`: the slot's own `StepBatch` when they fill it, else one over new views of the
+        block's places (which holds the slot's batch, so that `records_held` counts it)."""
+        if at == 0 and steps == self.steps:
+            self._lent = True
             self._batch.first = first
+            self.handed = 1
             return self._batch
-        return StepBatch(first, self._dt, tuple(a.view() for a in self._views), steps)
+        part = StepBatch.of_places(first, self._dt, tuple(a.view() for a in self._views), at, steps)
+        part._slot_batch = self._batch
+        self.handed = self.handed + 1 if at else 1
+        return part
 
     def record(self, step: int, at: int) -> StepRecord:
         """The record of the step just written at place `at`, as step `step` (its arrays are
@@ -94,7 +99,8 @@ class StepSlot:
         return self._batch.record(at)
 
     def records_held(self) -> int:
-        """How many records of this slot something holds (each holds the slot's batch)."""
+        """How many records and batches of this slot's places something holds (each holds the
+        slot's batch)."""
         return sys.getrefcount(self._batch) - self._idle[0]
 
     def bytes_per_step(self) -> int:
