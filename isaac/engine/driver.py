@@ -809,22 +809,26 @@ class Stepper:
         return (*(a[:m].copy() for a in self.carry[:-1]), self.carry[-1].copy())
 
     def new_batch(self, k: int, rows: int | None = None) -> tuple:
+        """A batch's arrays (`Batch`'s fields) with room for k steps and `rows` contact rows
+        (default: the rows a step had lately, k times), the offsets zeroed."""
+        batch = tuple(np.empty(shape, dtype) for shape, dtype in self.batch_layout(k, rows))
+        batch[5][:] = 0
+        return batch
+
+    def batch_layout(self, k: int, rows: int | None = None) -> tuple:
+        """The (shape, dtype) of each of `new_batch`'s arrays, in `Batch` order."""
         n = self.n
         m = self.work.joint_scratch.shape[0]
         rows = max(16, self._rows_per_step * k if rows is None else rows)
-        return tuple(
-            Batch(
-                np.empty((k, n, 2)), np.empty((k, n)), np.empty((k, n, 2)), np.empty((k, n)),
-                np.empty((k, n), dtype=bool), np.zeros(k + 1, dtype=np.int64),
-                np.empty(rows, dtype=np.int32), np.empty(rows, dtype=np.int32),
-                np.empty(rows, dtype=np.int32), np.empty(rows, dtype=np.int32),
-                np.empty(rows, dtype=np.int32), np.empty((rows, 2)), np.empty((rows, 2)),
-                np.empty(rows), np.empty(rows), np.empty((rows, 2)), np.empty((rows, 2)),
-                np.empty(rows), np.empty(rows), np.empty(rows),
-                np.empty((k, m, 2)), np.empty((k, m, 2)), np.empty((k, m, 2)), np.empty((k, m)),
-                np.empty((k, m)), np.empty((k, m)), np.empty((k, m, 2)),
-                np.empty((k, m, JOINT_IMPULSES)),
-            )
+        f, i32 = _F64, _I32
+        return (
+            ((k, n, 2), f), ((k, n), f), ((k, n, 2), f), ((k, n), f), ((k, n), _BOOL),
+            ((k + 1,), _I64),
+            ((rows,), i32), ((rows,), i32), ((rows,), i32), ((rows,), i32), ((rows,), i32),
+            ((rows, 2), f), ((rows, 2), f), ((rows,), f), ((rows,), f), ((rows, 2), f),
+            ((rows, 2), f), ((rows,), f), ((rows,), f), ((rows,), f),
+            ((k, m, 2), f), ((k, m, 2), f), ((k, m, 2), f), ((k, m), f), ((k, m), f),
+            ((k, m), f), ((k, m, 2), f), ((k, m, JOINT_IMPULSES), f),
         )  # fmt: skip
 
     def recorded(self, state, k: int) -> tuple[StepBatch | None, int, int]:
@@ -931,7 +935,7 @@ class Stepper:
         # pile come and go from step to step (a slot they outgrow is made again), and a batch of
         # many steps evens them out
         rows = max(16, self._rows_per_step * steps + self._rows_per_step // 2)
-        slot = StepSlot(self.new_batch(steps, rows), self.dt, BatchCall)
+        slot = StepSlot(self.batch_layout(steps, rows), self.dt, BatchCall)
         self._slots.append(slot)
         del self._slots[:-SPARE_BATCHES]
         return slot
@@ -1038,6 +1042,8 @@ def _carry_arrays(rows: int, joints: int) -> tuple:
         np.zeros((joints, JOINT_IMPULSES)),
     )
 
+
+_F64, _I32, _I64, _BOOL = (np.dtype(t) for t in (np.float64, np.int32, np.int64, np.bool_))
 
 # the slots a stepper keeps (`recorded`): a caller holds the last one or two while the next is
 # written (the simulation its last record, a generator its batch)

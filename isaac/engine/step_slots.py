@@ -16,6 +16,7 @@ keeps every record holds every slot).
 
 from __future__ import annotations
 
+import math
 import sys
 
 import numpy as np
@@ -29,16 +30,17 @@ class StepSlot:
     """A batch whose arrays are views of one block (`isaac.engine.driver.Batch`'s fields, in
     order)."""
 
-    def __init__(self, template: tuple, dt: float, call_of) -> None:
-        """template: a batch (`Stepper.new_batch(steps)`) whose shapes and dtypes the slot's
-        arrays take; dt: the step (s); call_of: what hands the arrays to the driver
-        (`isaac.engine.driver_kit.BatchCall`)."""
-        sizes = [-(-a.nbytes // _ALIGN) * _ALIGN for a in template]
-        self._block = np.empty(max(1, sum(sizes)), dtype=np.uint8)
+    def __init__(self, layout: tuple, dt: float, call_of) -> None:
+        """layout: the (shape, dtype) of each of the slot's arrays
+        (`Stepper.batch_layout(steps)`); dt: the step (s); call_of: what hands the arrays to
+        the driver (`isaac.engine.driver_kit.BatchCall`)."""
+        sizes = [math.prod(shape) * dtype.itemsize for shape, dtype in layout]
+        self._block = np.empty(max(1, sum(-(-b // _ALIGN) * _ALIGN for b in sizes)), np.uint8)
         arrays, at = [], 0
-        for a, size in zip(template, sizes):
-            arrays.append(self._block[at : at + a.nbytes].view(a.dtype).reshape(a.shape))
-            at += size
+        for (shape, dtype), size in zip(layout, sizes):
+            # (one constructor a view: a slice, a view and a reshape cost twice as much)
+            arrays.append(np.ndarray(shape, dtype, self._block, at))
+            at += -(-size // _ALIGN) * _ALIGN
         arrays[5][:] = 0  # the offsets: a call's rows start at row 0 (the driver writes [1:])
         self.arrays = tuple(arrays)  # what the driver writes
         self.call = call_of(self.arrays)  # (its kit made at the first call: 6 us)
