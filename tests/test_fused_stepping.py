@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from isaac.engine.records import CONTACT_FIELDS, StepRecord
+from isaac.engine.records import CONTACT_FIELDS, StepBatch, StepRecord
 from isaac.engine.simulation import Simulation
 from isaac.errors import SimulationError
 from isaac.scene import PRESETS, BodySpec, Scene, WorldSettings, generators, load_scene
@@ -575,3 +575,53 @@ def test_detect_between_driven_steps_finds_the_staged_contacts_and_changes_no_bi
         rows += len(found)
     assert rows > 0
     _all_same(expected, got)
+
+
+def test_whatever_a_caller_keeps_of_mixed_calls_keeps_its_bits():
+    """step(), run(), batches() and advance() in a fixed pseudo-random mix, keeping some of the
+    records, batches and arrays they hand out (and dropping the rest): everything kept still
+    holds what it held when handed out, which is the staged path's step."""
+    scene = SCENES["pile-balanced"]()
+    expected = {r.step: r for r in _stepped(scene, 4 * STEPS)}
+    sim = Simulation(scene)
+    rng = np.random.default_rng(12)
+    kept, copies = [], []  # (step, what) and (step, its copy when handed out)
+
+    def hand_out(step, thing, copy):
+        if rng.random() < 0.4:
+            kept.append((step, thing))
+            copies.append((step, copy))
+
+    while sim.state.step < 4 * STEPS - 12:
+        what = rng.integers(4)
+        if what == 0:
+            record = sim.step()
+            hand_out(record.step, record, _copied(record))
+        elif what == 1:
+            for record in sim.run(int(rng.integers(1, 6)), batch=int(rng.integers(1, 4))):
+                hand_out(record.step, record, _copied(record))
+        elif what == 2:
+            for batch in sim.batches(int(rng.integers(1, 9)), size=int(rng.integers(1, 5))):
+                if rng.random() < 0.3:  # an array taken from a record of it, the batch dropped
+                    record = batch.record(batch.steps - 1)
+                    hand_out(record.step, record.velocity, record.velocity.copy())
+                elif rng.random() < 0.3:  # the batch itself
+                    hand_out(
+                        batch.first, batch, [_copied(batch.record(s)) for s in range(batch.steps)]
+                    )
+                else:
+                    for s in range(batch.steps):
+                        record = batch.record(s)
+                        hand_out(record.step, record, _copied(record))
+        else:
+            sim.advance(int(rng.integers(1, 4)))
+    assert len(kept) > 30
+    for (step, thing), (_, copy) in zip(kept, copies):
+        if isinstance(thing, StepBatch):
+            _all_same(copy, [thing.record(s) for s in range(thing.steps)])
+            _all_same([expected[step + s] for s in range(thing.steps)], copy)
+        elif isinstance(thing, np.ndarray):
+            assert thing.tobytes() == copy.tobytes() == expected[step].velocity.tobytes()
+        else:
+            _same_record(thing, copy)
+            _same_record(thing, expected[step])
