@@ -16,7 +16,6 @@ keeps every record holds every slot).
 
 from __future__ import annotations
 
-import math
 import sys
 
 import numpy as np
@@ -34,7 +33,7 @@ class StepSlot:
         """layout: the (shape, dtype) of each of the slot's arrays
         (`Stepper.batch_layout(steps)`); dt: the step (s); call_of: what hands the arrays to
         the driver (`isaac.engine.driver_kit.BatchCall`)."""
-        sizes = [math.prod(shape) * dtype.itemsize for shape, dtype in layout]
+        sizes = [_nbytes(shape, dtype) for shape, dtype in layout]
         self._block = np.empty(max(1, sum(-(-b // _ALIGN) * _ALIGN for b in sizes)), np.uint8)
         arrays, at = [], 0
         for (shape, dtype), size in zip(layout, sizes):
@@ -107,3 +106,10 @@ class StepSlot:
 
     def bytes_per_step(self) -> int:
         return -(-self._block.nbytes // self.steps)
+
+
+def _nbytes(shape: tuple, dtype: np.dtype) -> int:
+    size = dtype.itemsize
+    for extent in shape:
+        size *= extent
+    return size
