@@ -9,9 +9,9 @@ block of memory, made once, with what hands them to the driver (a `BatchCall`) a
 `StepBatch` of read-only views that hands them out. So two reference counts say whether
 anything still holds the slot: the `StepBatch`'s (the batch, or a record of it) and the
 block's (any array taken from them, which numpy makes a view of the block). A slot in use is
-never written where it handed something out: another is taken or made, or `Stepper.one_step`
-records its next step in the place after the last record it handed out from it (a caller that
-keeps every record holds every slot).
+never written where it handed something out: another is taken or made, or the next steps go in
+the places after the last record or batch it handed out (`Stepper._held_slot`: a caller that
+keeps everything holds every slot).
 """
 
 from __future__ import annotations
@@ -33,13 +33,13 @@ class StepSlot:
         """layout: the (shape, dtype) of each of the slot's arrays
         (`Stepper.batch_layout(steps)`); dt: the step (s); call_of: what hands the arrays to
         the driver (`isaac.engine.driver_kit.BatchCall`)."""
-        sizes = [_nbytes(shape, dtype) for shape, dtype in layout]
-        self._block = np.empty(max(1, sum(-(-b // _ALIGN) * _ALIGN for b in sizes)), np.uint8)
+        sizes = [-(-_nbytes(shape, dtype) // _ALIGN) * _ALIGN for shape, dtype in layout]
+        self._block = np.empty(max(1, sum(sizes)), np.uint8)
         arrays, at = [], 0
         for (shape, dtype), size in zip(layout, sizes):
             # (one constructor a view: a slice, a view and a reshape cost twice as much)
             arrays.append(np.ndarray(shape, dtype, self._block, at))
-            at += -(-size // _ALIGN) * _ALIGN
+            at += size
         arrays[5][:] = 0  # the offsets: a call's rows start at row 0 (the driver writes [1:])
         self.arrays = tuple(arrays)  # what the driver writes
         self.call = call_of(self.arrays)  # (its kit made at the first call: 6 us)
@@ -57,8 +57,8 @@ class StepSlot:
         self._idle = self._references()
         self._idle_handed = self._handed_references()
         self._lent = False  # whether the batch itself went out (`batch`), not only a record
-        # the place `Stepper.one_step` may record in while the slot is held: after the last
-        # record it handed out from here (a slot `recorded` fills: none)
+        # the place the next steps may go in while the slot is held (`Stepper._held_slot`):
+        # after the last record or batch handed out from here (a slot lent whole: none)
         self.next_place = self.steps
         self.handed = 0  # records and batches handed out since a step was recorded in place 0
 
@@ -80,24 +80,27 @@ class StepSlot:
         """The batch of the `steps` steps just written from place `at`, the first of them step
         `first`: the slot's own `StepBatch` when they fill it, else one over new views of the
         block's places (which holds the slot's batch, so that `records_held` counts it)."""
+        self._handing(at, at + steps)
         if at == 0 and steps == self.steps:
             self._lent = True
             self._batch.first = first
-            self.handed = 1
             return self._batch
         part = StepBatch.of_places(first, self._dt, tuple(a.view() for a in self._views), at, steps)
         part._slot_batch = self._batch
-        self.handed = self.handed + 1 if at else 1
         return part
 
     def record(self, step: int, at: int) -> StepRecord:
         """The record of the step just written at place `at`, as step `step` (its arrays are
-        views made when first read, which hold the block; the batch itself stays in the slot).
-        `Stepper.one_step` writes the places after those of records still held, never theirs."""
+        views made when first read, which hold the block; the batch itself stays in the slot)."""
+        self._handing(at, at + 1)
         self._lent = False
-        self.handed = self.handed + 1 if at else 1
         self._batch.first = step - at
         return self._batch.record(at)
+
+    def _handing(self, at: int, end: int) -> None:
+        """Places at .. end - 1 go out: the next steps may go after them, never in them."""
+        self.handed = self.handed + 1 if at else 1
+        self.next_place = end
 
     def records_held(self) -> int:
         """How many records and batches of this slot's places something holds (each holds the
