@@ -75,3 +75,32 @@ def test_bodies_enter_and_leave_at_their_times():
     # a body that has not entered stays where the scene put it; one that left stays where it was
     assert history[3][2][0] == 5.0
     assert history[-1][2][1] == history[2][2][1] < 5.0
+
+
+@pytest.mark.parametrize("how", ["staged", "step", "advance"])
+@pytest.mark.parametrize("spin", [math.inf, 1e19, 2e9])
+def test_a_spin_past_any_scene_fails_at_its_step_instead_of_wrapping_for_ever(how, spin):
+    # |w h| = 1e17 rad: x - 2 pi == x, the turn-by-turn wrap never ended; inf: the same;
+    # 2e7 rad: 3 million turns, past WRAP_LIMIT (a scene's first step moves at most 1e6 rad)
+    from isaac.engine.integrate import WRAP_LIMIT
+    from isaac.errors import SimulationError
+
+    sim = Simulation(scene(box("top", angular_velocity=1.0)), staged=how == "staged")
+    sim.step()
+    assert abs(spin * H) > WRAP_LIMIT
+    sim.state.angular_velocity[0] = spin
+    with pytest.raises(SimulationError) as err:
+        sim.advance(1) if how == "advance" else sim.step()
+    assert err.value.step == 2 and err.value.body == "top"
+    assert "angle" in str(err.value)
+    assert sim.step_index == 1  # the failing step was undone
+
+
+def test_the_fastest_spin_a_scene_may_start_with_still_wraps():
+    from isaac.scene.limits import MAX_SPEED
+
+    sim = Simulation(scene(box("top", angular_velocity=MAX_SPEED), dt=1.0))
+    rec = sim.step()
+    assert abs(rec.angle[0]) <= math.pi
+    # 159,155 turns subtracted one at a time, each rounded: within 1e-3 rad of the exact angle
+    assert abs(math.remainder(rec.angle[0] - MAX_SPEED, 2 * math.pi)) < 1e-3

@@ -23,6 +23,12 @@ from isaac.engine import kernel_cache  # noqa: F401  (first: keys the kernels' n
 
 PI = np.pi
 TWO_PI = 2.0 * np.pi
+# A body whose angle moves more than this in one (sub)step (rad) has diverged: its angle is left
+# unwrapped, which the divergence check stops at (DIVERGED_ANGLE). Turn by turn, wrapping it took
+# |angle| / 2 pi subtractions, forever for an infinite angle or one past 2^54 (x - 2 pi == x):
+# a step hung instead of failing. Above any scene's first step (|w| <= 1e6 rad/s, dt <= 1 s:
+# isaac.scene.limits), and at most 1.6 million turns (about 2 ms) below it.
+WRAP_LIMIT = 1e7
 
 
 @numba.njit(cache=True, nogil=True, _nrt=False)  # (no reference counts: see driver)
@@ -36,16 +42,18 @@ def add_gravity(velocity, movable, exists, gx, gy, h):
 
 @numba.njit(cache=True, nogil=True, _nrt=False)  # (no reference counts: see driver)
 def advance_positions(position, angle, velocity, angular_velocity, movable, exists, h):
-    """x += v h (m); angle += w h (rad), wrapped into [-pi, pi]."""
+    """x += v h (m); angle += w h (rad), wrapped into [-pi, pi] (left as it is beyond
+    WRAP_LIMIT, or not finite: diverged)."""
     for i in range(position.shape[0]):
         if exists[i] and movable[i]:
             position[i, 0] += velocity[i, 0] * h
             position[i, 1] += velocity[i, 1] * h
             a = angle[i] + angular_velocity[i] * h
-            while a > PI:
-                a -= TWO_PI
-            while a < -PI:
-                a += TWO_PI
+            if abs(a) <= WRAP_LIMIT:
+                while a > PI:
+                    a -= TWO_PI
+                while a < -PI:
+                    a += TWO_PI
             angle[i] = a
 
 
