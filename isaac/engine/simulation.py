@@ -214,6 +214,14 @@ class Simulation:
             return self._driven_step()
         return self._staged_step()
 
+    @property
+    def driver_cached(self) -> bool:
+        """Whether the compiled driver is at hand without compiling it: loaded in this process
+        or in numba's cache (what `step()` waits for before it takes the driver). A replay
+        takes its steps a batch at a time only then, so that on a cold cache it never waits
+        7-10 s for the driver (`replay.replayed`)."""
+        return self._step_driver or self._step_takes_driver()
+
     def _step_takes_driver(self) -> bool:
         """Whether `step()` calls the driver for its one step: when the driver is ready and
         numba has it (loaded, or in its cache). While the driver is still to be compiled,

@@ -496,20 +496,50 @@ def test_diff_against_a_truncated_log_fails_unless_partial(tmp_path, capsys):
     assert out.startswith("partial: ") and "steps compared, identical up to step" in out
 
 
-def test_reading_ahead_keeps_the_order_and_raises_where_the_source_raised():
+# groups of 1, of 7 (the end falls inside a group), and groups cut short by their weight
+GROUPINGS = [{}, {"group": 7}, {"group": 64, "weigh": lambda k: k, "budget": 40}]
+
+
+@pytest.mark.parametrize("grouping", GROUPINGS)
+def test_reading_ahead_keeps_the_order_and_raises_where_the_source_raised(grouping):
     from replay.reader import Prefetch
 
-    assert list(Prefetch(iter(range(100)), depth=3)) == list(range(100))
+    assert list(Prefetch(iter(range(100)), depth=3, **grouping)) == list(range(100))
 
     def failing():
-        yield from range(5)
-        raise LogError("step 5 is out of order")
+        yield from range(12)
+        raise LogError("step 12 is out of order")
 
     got = []
-    with pytest.raises(LogError, match="step 5 is out of order"):
-        for item in Prefetch(failing(), depth=2):
+    ahead = Prefetch(failing(), depth=2, **grouping)
+    with pytest.raises(LogError, match="step 12 is out of order"):
+        for item in ahead:
             got.append(item)
-    assert got == [0, 1, 2, 3, 4]
+    assert got == list(range(12))
+    with pytest.raises(StopIteration):  # raised once, then the end
+        next(ahead)
+
+
+def test_weighed_groups_are_handed_over_once_they_reach_their_budget():
+    import threading
+
+    from replay.reader import Prefetch
+
+    read = []
+    go_on = threading.Event()
+
+    def items():
+        for k in range(10):
+            read.append(k)
+            if k == 5:
+                go_on.wait(10)
+            yield k
+
+    ahead = Prefetch(items(), group=64, weigh=lambda k: 10, budget=30)
+    # the first group (0, 1, 2: 30 bytes) is there while the reader waits inside item 5
+    assert [next(ahead) for _ in range(3)] == [0, 1, 2]
+    go_on.set()
+    assert list(ahead) == list(range(3, 10))
 
 
 def test_closing_a_read_ahead_stops_its_thread_and_closes_the_source():
