@@ -9,7 +9,8 @@ Python runs per step except the comparison itself. One step a call, encoded a st
 recorded at (bench/README.md, "Replay").
 
 Until numba has the compiled driver (a cold cache), the steps are taken one at a time on the
-staged path (`Simulation.driver_cached`), which does not wait for it to compile.
+staged path (`Simulation.driver_cached`), which does not wait for it to compile; until it has
+the packer (`isaac run --mcap` compiles it), each step is encoded alone (`_packer_cold`).
 
 The packer writes the current log format on little-endian machines; a log of format 1, a
 machine of the other byte order, and a step the packer refuses (a NaN or an infinity in it)
@@ -26,6 +27,8 @@ from __future__ import annotations
 import sys
 
 import numpy as np
+
+from recorder.mcap_pack import BatchPacker, one_step_batch
 
 # the steps of a batch: 64 for small scenes, fewer as they grow (about 4,096 body-steps a
 # batch, as `isaac run` takes them), so that a log's last batch computes few steps past its end
@@ -44,10 +47,10 @@ class ReplayedSteps:
     """
 
     def __init__(self, sim, encoder, joints, *, batched: bool, stop: int | None = None) -> None:
-        from recorder.mcap_pack import BatchPacker
         from recorder.mcap_writer import encode_world, record_channels
 
         self.sim = sim
+        self.dt = sim.scene.world.dt
         self.encoder = encoder
         self.joints = joints
         self.stop = stop
@@ -64,12 +67,12 @@ class ReplayedSteps:
             BatchPacker(
                 sim.model,
                 encoder.gravity,
-                sim.scene.world.dt,
+                self.dt,
                 channels,
                 joints,
                 encode_world=encode_world,
             )
-            if batched and sys.byteorder == "little"
+            if batched and sys.byteorder == "little" and not _packer_cold()
             else None
         )
         self._encode_world = encode_world
@@ -81,8 +84,7 @@ class ReplayedSteps:
     def _drop(self) -> None:
         self._batch = None
         self._first = self.next  # the step of the batch's place 0
-        self._packed = 0  # how many of its steps `_messages` holds
-        self._messages: list[dict] = []
+        self._messages: list[dict] = []  # the payloads of its first steps, packed
 
     def restart(self, exists: np.ndarray) -> None:
         """Go on from the simulation's state as it is now (after `Simulation.resume`), whose
@@ -99,7 +101,9 @@ class ReplayedSteps:
         if step != self.next:
             raise ValueError(f"step {step} asked for; the next replayed step is {self.next}")
         if step == self.sim.step_index and self._batch is None:  # the start: the state as it is
-            out = self._encoded(self.sim.record())
+            record = self.sim.record()
+            packed = [] if self._packer is None else self._packed(one_step_batch(record, self.dt))
+            out = packed[0] if packed else self._encoded(record)
         else:
             place = step - self._first
             if self._batch is None or place >= self._batch.steps:
@@ -146,19 +150,19 @@ class ReplayedSteps:
         self._batch = next(sim.batches(k, size=k))
         self.batches += 1
         if self._packer is not None:
-            self._pack()
+            self._messages = self._packed(self._batch)
 
-    def _pack(self) -> None:
-        """The batch's messages as `isaac run` writes them: one `pack_records` call; each step's
-        payloads sliced out of its Message records (`scan_records`)."""
+    def _packed(self, batch) -> list[dict]:
+        """The payloads of a batch's steps as `isaac run` writes them (one `pack_records` call,
+        each step's sliced out of its Message records: `scan_records`), up to the first step
+        the packer refuses."""
         from recorder.mcap_pack import RECORD_HEAD, scan_records
 
-        batch = self._batch
         plan = self._packer.plan(batch, self._last_exists)
         buf = np.empty(int(plan.sizes.sum()), dtype=np.uint8)
         done, end, _ = self._packer.pack(buf, 0, 0, batch.steps, batch, plan)
         if not done:
-            return
+            return []
         starts, ends, channel, sequence, _ = scan_records(buf, 0, end)
         data = buf.tobytes()  # one copy; each payload a bytes slice of it
         topic = self._topic
@@ -167,12 +171,20 @@ class ReplayedSteps:
         for r in range(starts.shape[0]):
             head = int(starts[r]) + RECORD_HEAD
             messages[int(sequence[r]) - first][topic[int(channel[r])]] = data[head : int(ends[r])]
-        self._messages = messages
-        self._packed = done
         self._last_exists = np.array(batch.exists[done - 1], dtype=bool)
+        return messages
 
     def _step_payloads(self, place: int) -> dict[str, bytes]:
-        if place < self._packed:
+        if place < len(self._messages):
             return self._messages[place]
         # not packed (no packer, or the packer refused a step from here on): a step at a time
         return self._encoded(self._batch.record(place))
+
+
+def _packer_cold() -> bool:
+    """Whether numba's cache lacks the packer (`recorder.mcap_pack.pack_records`, some 14 s to
+    compile on the 2-core machine; `isaac run --mcap` compiles it): the replay then encodes a
+    step at a time with the frame encoder, as it did before batches, rather than wait for it."""
+    from recorder.compile_ahead import cold
+
+    return cold(mcap=True, rrd=False)
