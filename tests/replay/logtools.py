@@ -206,3 +206,15 @@ def contacts_with(data: bytes, change) -> bytes:
         contacts=contacts_from_message(d),
     )
     return encode_contacts(rec)
+
+
+def bodies_changed(src: Path, dst: Path, steps, change) -> None:
+    """Copy the log ``src`` to ``dst`` with the ``/bodies`` payload of each step in ``steps``
+    edited by ``change(arrays)`` (`bodies_with`)."""
+    rewrite(
+        src,
+        dst,
+        message=lambda topic, step, data: (
+            bodies_with(data, change) if topic == "/bodies" and step in steps else data
+        ),
+    )

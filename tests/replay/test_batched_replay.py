@@ -22,7 +22,7 @@ from replay.report import to_json
 
 sys.path.insert(0, str(Path(__file__).parent))
 sys.path.insert(0, str(Path(__file__).parents[1]))
-from logtools import COMINGS_AND_GOINGS, STACK, bodies_with, record, rewrite  # noqa: E402
+from logtools import COMINGS_AND_GOINGS, STACK, bodies_changed, record  # noqa: E402
 from test_fused_stepping import _diverging  # noqa: E402
 
 
@@ -92,13 +92,7 @@ def test_batches_find_the_differences_a_step_at_a_time_finds(
         arrays["angle"][1] = np.nextafter(arrays["angle"][1], -np.inf)
 
     bad = tmp_path / "bad.mcap"
-    rewrite(
-        stack_log,
-        bad,
-        message=lambda topic, step, data: (
-            bodies_with(data, bump) if topic == "/bodies" and step in changed else data
-        ),
-    )
+    bodies_changed(stack_log, bad, changed, bump)
     want = _step_at_a_time(monkeypatch, str(bad), all_steps=all_steps)
     monkeypatch.setattr(replayed, "MAX_BATCH", size)
     packed = _counted(monkeypatch)
@@ -121,13 +115,7 @@ def test_a_replayed_step_that_fails_is_reported_at_its_step_and_the_replay_goes_
         arrays["velocity"][2] = 1e300
 
     bad = tmp_path / "bad.mcap"
-    rewrite(
-        stack_log,
-        bad,
-        message=lambda topic, step, data: (
-            bodies_with(data, absurd) if topic == "/bodies" and step == k else data
-        ),
-    )
+    bodies_changed(stack_log, bad, {k}, absurd)
     want = _step_at_a_time(monkeypatch, str(bad), all_steps=True)
     got = replay_log(str(bad), all_steps=True)
     assert _verdict(got) == _verdict(want)

@@ -24,6 +24,7 @@ from logtools import (
     COMINGS_AND_GOINGS,
     SMALL_PILE,
     STACK,
+    bodies_changed,
     bodies_with,  # noqa: E402
     contacts_with,
     record,
@@ -174,13 +175,7 @@ def test_all_lists_every_differing_step(stack_log, tmp_path, capsys):
         arrays["angle"][1] = np.nextafter(arrays["angle"][1], -np.inf)
 
     bad = tmp_path / "bad.mcap"
-    rewrite(
-        stack_log,
-        bad,
-        message=lambda topic, step, data: (
-            bodies_with(data, bump) if topic == "/bodies" and step in changed else data
-        ),
-    )
+    bodies_changed(stack_log, bad, changed, bump)
     report = replay_log(str(bad), all_steps=True)
     steps = report.divergent_steps()
     # each changed step differs; the step after it does not follow from the changed state
