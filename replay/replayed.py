@@ -5,8 +5,9 @@ step re-simulated. `ReplayedSteps` takes the steps from the engine a batch per c
 (`Simulation.batches`) and packs each batch's messages in one compiled call too
 (`recorder.mcap_pack.BatchPacker`, the packer `isaac run` writes its logs with), so that no
 Python runs per step except the comparison itself. One step a call, encoded a step at a time
-(`StepEncoder`), replayed the 2-body bounce at about 8,500 steps/s against the 220,000 it is
-recorded at (bench/README.md, "Replay").
+(`StepEncoder`), replayed the 2-body bounce at about 8,700 steps/s, 17-18x the time a step of
+the run that wrote the log; in batches 41,900 steps/s, 2.8-3.1x (bench/README.md, "Replay in
+batches").
 
 Until numba has the compiled driver (a cold cache), the steps are taken one at a time on the
 staged path (`Simulation.driver_cached`), which does not wait for it to compile; until it has
