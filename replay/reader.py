@@ -137,9 +137,10 @@ class Prefetch:
         self._queue: queue.Queue = queue.Queue(maxsize=depth)
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, name="isaac-replay-reader", daemon=True)
-        self._done = False
         self._ahead: list = []  # the group being handed out, reversed
-        self._end = None  # what the thread ended with: _END, or the exception it raised
+        # what the thread ended with (_END, or the exception it raised) once its last group
+        # came; None while it reads
+        self._end = None
         self._thread.start()
 
     def _run(self) -> None:
@@ -172,7 +173,6 @@ class Prefetch:
             group, end = self._queue.get()
             self._ahead = group[::-1]
             if end is not None:
-                self._done = True
                 self._thread.join()
                 self._end = end
         return self._ahead.pop()
@@ -180,10 +180,8 @@ class Prefetch:
     def close(self) -> None:
         """Stop reading ahead; the thread ends after the item it is working on."""
         self._ahead = []
-        if self._end is None:
+        if self._end is None:  # still reading
             self._end = self._END  # (what `next` says from now on)
-        if not self._done:
-            self._done = True
             self._stop.set()
             while self._thread.is_alive():
                 try:  # make room for an item the thread is blocked putting

@@ -111,7 +111,6 @@ class ReplayedSteps:
                 if not self.sim.driver_cached:
                     # a cold cache: a step at a time on the staged path, as `step()` takes
                     # them, rather than waiting for the driver to compile
-                    self._drop()
                     self.batches += 1
                     out = self._encoded(self.sim.step())
                     self.next = step + 1

@@ -21,3 +21,16 @@ def box(name: str, width: float = 1.0, height: float = 1.0, **fields) -> BodySpe
 def scene(*bodies: BodySpec, name: str = "inline", **world_fields) -> Scene:
     preset = world_fields.pop("preset", "seed")
     return Scene(name=name, world=world(preset, **world_fields), bodies=tuple(bodies))
+
+
+def diverging() -> Scene:
+    """Boxes in a free fall that passes the divergence bound (1e12 m) within a few steps
+    (dt = 2e4 s: WorldSettings built directly, as the scene loader refuses dt > 1 s)."""
+    world = WorldSettings(**{**PRESETS["balanced"], "dt": 2e4, "steps": 50})
+    box = ((-0.5, -0.5), (0.5, -0.5), (0.5, 0.5), (-0.5, 0.5))
+    bodies = (
+        BodySpec("floor", box, concrete=True),
+        BodySpec("resting", box, position=(3.0, 0.9)),
+        BodySpec("anvil", box, position=(0.0, 0.9)),
+    )
+    return Scene("diverging", world, bodies)

@@ -9,11 +9,12 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from physics_helpers import diverging
 
 from isaac.engine.records import CONTACT_FIELDS, StepBatch, StepRecord
 from isaac.engine.simulation import Simulation
 from isaac.errors import SimulationError
-from isaac.scene import PRESETS, BodySpec, Scene, WorldSettings, generators, load_scene
+from isaac.scene import PRESETS, Scene, WorldSettings, generators, load_scene
 
 STEPS = 40
 SCENE_DIR = Path(__file__).resolve().parents[1] / "scenes"
@@ -151,21 +152,8 @@ def test_a_solver_scratch_that_grows_mid_run_gives_the_bits_of_one_sized_generou
     _all_same(big, [staged.step() for _ in range(STEPS)])
 
 
-def _diverging() -> Scene:
-    """Boxes in a free fall that passes the divergence bound (1e12 m) within a few steps
-    (dt = 2e4 s: WorldSettings built directly, as the scene loader refuses dt > 1 s)."""
-    world = WorldSettings(**{**PRESETS["balanced"], "dt": 2e4, "steps": 50})
-    box = ((-0.5, -0.5), (0.5, -0.5), (0.5, 0.5), (-0.5, 0.5))
-    bodies = (
-        BodySpec("floor", box, concrete=True),
-        BodySpec("resting", box, position=(3.0, 0.9)),
-        BodySpec("anvil", box, position=(0.0, 0.9)),
-    )
-    return Scene("diverging", world, bodies)
-
-
 def test_a_diverging_run_stops_at_the_same_step_naming_the_same_body():
-    scene = _diverging()
+    scene = diverging()
     staged = Simulation(scene, staged=True)
     kept = []
     with pytest.raises(SimulationError) as want:

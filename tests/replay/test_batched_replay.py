@@ -23,7 +23,7 @@ from replay.report import to_json
 sys.path.insert(0, str(Path(__file__).parent))
 sys.path.insert(0, str(Path(__file__).parents[1]))
 from logtools import COMINGS_AND_GOINGS, STACK, bodies_changed, record  # noqa: E402
-from test_fused_stepping import _diverging  # noqa: E402
+from physics_helpers import diverging  # noqa: E402
 
 
 @pytest.fixture(scope="module")
@@ -139,7 +139,7 @@ def _payloads(sim, encoder, joints, records) -> list[dict]:
 
 
 def test_a_step_that_fails_inside_a_batch_fails_after_every_step_before_it_was_given():
-    scene = _diverging()
+    scene = diverging()
     staged = Simulation(scene, staged=True)
     records = [staged.record()]
     with pytest.raises(SimulationError) as want:
