@@ -842,6 +842,16 @@ def test_verify_replays_every_log_and_names_the_run_and_step_of_a_one_ulp_edit(t
     rewrite(log, tmp_path / "edited.mcap", message=one_ulp)
     os.replace(tmp_path / "edited.mcap", log)
     rows = verify(str(out), client=client).to_pylist()
+    # not the file its row names (sha256), and replayed all the same
+    assert [r["verdict"] for r in rows] == ["identical", "identical", "wrong log", "identical"]
+    assert "replayed: diverged" in rows[2]["detail"] and rows[2]["first_divergent_step"] == 12
+    # an edit the table was made to agree with: the replay alone finds it
+    table = pq.read_table(out / "runs.parquet")
+    shas = table.column("log_sha256").to_pylist()
+    shas[2] = hashlib.sha256(log.read_bytes()).hexdigest()
+    table = table.set_column(table.schema.get_field_index("log_sha256"), "log_sha256", [shas])
+    pq.write_table(table, out / "runs.parquet")
+    rows = verify(str(out), client=client).to_pylist()
     assert [r["verdict"] for r in rows] == ["identical", "identical", "diverged", "identical"]
     bad = rows[2]
     assert bad["first_divergent_step"] == 12 and bad["ulps"] == 1

@@ -611,6 +611,15 @@ def cmd_verify(args: argparse.Namespace) -> int:
         )
     if len(bad) > 10:
         print(f"  ... and {len(bad) - 10} more (verdict column)")
+    # the replay's notes on logs that are identical (versions, settings read differently)
+    noted: dict[str, int] = {}
+    for r in rows:
+        if r["verdict"] == "identical" and r["detail"]:
+            noted[r["detail"]] = noted.get(r["detail"], 0) + 1
+    for text, n in sorted(noted.items(), key=lambda item: (-item[1], item[0]))[:5]:
+        print(f"  note ({n} identical log{'s' if n > 1 else ''}): {text}")
+    if len(noted) > 5:
+        print(f"  ... and {len(noted) - 5} more notes (detail column)")
     print(f"  table: {os.path.join(args.dir, VERIFY_TABLE)}")
     return 1 if bad else 0
 

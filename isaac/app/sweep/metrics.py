@@ -62,6 +62,26 @@ def columns(metrics, final_bodies) -> list:
     return out
 
 
+def _kept_apart(model, c: int) -> np.ndarray | None:
+    """The bodies the broad phase never pairs with concrete body `c` (sorted indices; None
+    when there are none): those the collision filter keeps from it
+    (`isaac.collision_filter.collides`) and those a joint connects to it without
+    `collide_connected` (`model.no_collide`, the broad phase's own keys)."""
+    from isaac.collision_filter import collides
+
+    n = model.n_bodies
+    others = np.arange(n)
+    ok = collides(
+        model.category[c], model.mask[c], model.group[c], model.category, model.mask, model.group
+    )
+    if model.no_collide.size:
+        keys = np.minimum(others, c) * n + np.maximum(others, c)
+        ok &= ~np.isin(keys, model.no_collide)
+    ok[c] = True  # itself: not a moving body
+    apart = np.flatnonzero(~ok)
+    return apart if apart.size else None
+
+
 class Measure:
     """The metrics of one run, fed the initial record (`__init__`) and then each batch."""
 
@@ -83,6 +103,26 @@ class Measure:
         tunneling = "tunneled" in self.metrics
         self.planes = _concrete_planes(self.model, sim.state) if tunneling else []
         self.discs = _concrete_discs(self.model, sim.state) if tunneling else []
+        # the concrete bodies of `planes` and of `discs`, in their orders, and the bodies each
+        # may not collide with (None: it may with every one)
+        model = self.model
+        self.plane_bodies = np.flatnonzero(model.concrete & (model.vertex_count > 1))
+        self.disc_bodies = np.flatnonzero(model.concrete & (model.vertex_count == 1))
+        # (model.filtered: some filter is not the default, or a joint keeps a pair apart)
+        pairs = tunneling and model.filtered
+        self.plane_apart = [_kept_apart(model, c) if pairs else None for c in self.plane_bodies]
+        self.disc_apart = [_kept_apart(model, c) if pairs else None for c in self.disc_bodies]
+        # some concrete body enters or leaves: a path counts only while it exists
+        self.timed_concrete = (
+            tunneling
+            and model.timed
+            and bool(
+                np.any(((model.enters_at > 0.0) | np.isfinite(model.leaves_at)) & model.concrete)
+            )
+        )
+        self.pairwise = self.timed_concrete or any(
+            x is not None for x in self.plane_apart + self.disc_apart
+        )
         self._state0 = sim.state
         self._boxes = None
         self.tunneled = np.zeros(self.model.n_bodies, dtype=bool)
@@ -119,6 +159,12 @@ class Measure:
         return self._boxes
 
     def _tunneling(self, batch) -> None:
+        """Mark the bodies whose centre's path in a step of `batch` crossed a concrete body
+        that could have stopped it: one that existed at both ends of the step, whose collision
+        filter lets the pair collide, and that no joint connects to the body (unless the joint
+        says `collide_connected`). A wheel on an axle has its centre inside the concrete hub in
+        every step, and a body whose mask leaves out a concrete ledge falls through it, by
+        design: neither is a tunnel."""
         from isaac.app.tradeoff.trajectory import _crossed_concrete
 
         n = self.model.n_bodies
@@ -126,26 +172,52 @@ class Measure:
         p0 = np.concatenate([np.asarray(self.last.position)[None], p1[:-1]])
         e1 = np.asarray(batch.exists)
         e0 = np.concatenate([np.asarray(self.last.exists)[None], e1[:-1]])
-        a, b = p0.reshape(-1, 2), p1.reshape(-1, 2)
-        if a.shape[0] * len(self.planes) < PREFILTER_PATHS:  # few paths: clip them all
-            crossed = _crossed_concrete(self.planes, a, b, self.discs).reshape(-1, n)
-            crossed &= e0 & e1 & self.movable
+        a, b = p0.reshape(-1, 2), p1.reshape(-1, 2)  # path k: step k // n, body k % n
+        prefilter = a.shape[0] * len(self.planes) >= PREFILTER_PATHS
+        if not prefilter and not self.pairwise:  # few paths, every pair may collide: one call
+            crossed = _crossed_concrete(self.planes, a, b, self.discs)
+            crossed = crossed.reshape(-1, n) & e0 & e1 & self.movable
             self.tunneled |= crossed.any(axis=0)
             return
         x0, x1 = np.minimum(a[:, 0], b[:, 0]), np.maximum(a[:, 0], b[:, 0])
         y0, y1 = np.minimum(a[:, 1], b[:, 1]), np.maximum(a[:, 1], b[:, 1])
+        boxes = self._bounds() if prefilter else [None] * len(self.planes)
         crossed = np.zeros(a.shape[0], dtype=bool)
-        for plane, (b_lo, b_hi) in zip(self.planes, self._bounds()):
-            near = (x1 >= b_lo[0]) & (x0 <= b_hi[0])
-            near &= y1 >= b_lo[1]
-            near &= y0 <= b_hi[1]
-            near = np.flatnonzero(near)
+        for plane, box, c, apart in zip(self.planes, boxes, self.plane_bodies, self.plane_apart):
+            if box is None:
+                near = np.arange(a.shape[0])
+            else:
+                b_lo, b_hi = box
+                near = (x1 >= b_lo[0]) & (x0 <= b_hi[0])
+                near &= y1 >= b_lo[1]
+                near &= y0 <= b_hi[1]
+                near = np.flatnonzero(near)
+            near = self._could_collide(near, c, apart, e0, e1)
             if near.size:
                 crossed[near] |= _crossed_concrete([plane], a[near], b[near])
-        if self.discs:  # concrete circles: a distance test per path, cheap enough for all
-            crossed |= _crossed_concrete([], a, b, self.discs)
+        # concrete circles: a distance test per path, cheap enough for all; the discs every
+        # body may hit in one call
+        free = [d for d, apart in zip(self.discs, self.disc_apart) if apart is None]
+        if free and not self.timed_concrete:
+            crossed |= _crossed_concrete([], a, b, free)
+        for disc, c, apart in zip(self.discs, self.disc_bodies, self.disc_apart):
+            if apart is None and not self.timed_concrete:
+                continue
+            near = self._could_collide(np.arange(a.shape[0]), c, apart, e0, e1)
+            if near.size:
+                crossed[near] |= _crossed_concrete([], a[near], b[near], [disc])
         crossed = crossed.reshape(-1, n) & e0 & e1 & self.movable
         self.tunneled |= crossed.any(axis=0)
+
+    def _could_collide(self, paths, c, apart, e0, e1) -> np.ndarray:
+        """The paths among `paths` (indices, step * n + body) whose body could collide with
+        concrete body `c` in that step: not one of `apart`, and `c` existing at both ends."""
+        n = self.model.n_bodies
+        if apart is not None:
+            paths = paths[~np.isin(paths % n, apart)]
+        if self.timed_concrete:
+            paths = paths[(e0[:, c] & e1[:, c])[paths // n]]
+        return paths
 
     def values(self) -> dict:
         """{column: value} for the metric columns (see `columns`)."""

@@ -2,7 +2,9 @@
 check `isaac replay` makes), one verdict row per run in DIR/verify.parquet.
 
 A sweep recorded on one machine can be checked on another: the logs carry their scenes, and the
-verdict is the replay's own (identical, or the first divergence: step, body, field).
+verdict is the replay's own (identical, or the first divergence: step, body, field), unless the
+file is not the log its row names by sha256 (`wrong log`): a log replaced by another run's, or
+two logs swapped, replay identical, since each is a true log of some run.
 """
 
 from __future__ import annotations
@@ -13,17 +15,28 @@ import time
 from isaac.app.sweep.spec import SweepError
 
 VERIFY_TABLE = "verify.parquet"
+WRONG_LOG = "wrong log"  # the verdict of a file whose sha256 is not the one its row names
 
 
 def verify_chunk(task: dict) -> list[dict]:
-    """Replay the logs of `task["runs"]` ([(index, absolute log path)]); a verdict row each."""
+    """Check and replay the logs of `task["runs"]` ([(index, log path relative to
+    `task["out"]`, the row's log_sha256)]); a verdict row each.
+
+    A file that is not the log its row names (`worker.log_differs`: another run's log, one
+    edited or replaced) is `wrong log` whatever its replay says, for a log swapped with another
+    run's replays identical; it is replayed all the same, and its `detail` says both (`verify`
+    adds whose log it is). The replay's notes (versions, recorded settings read differently,
+    ...) go into `detail` too, after the divergence's or the damage's own."""
+    from isaac.app.sweep.worker import log_differs, sha256_of
     from isaac.errors import IsaacError
     from replay.compare import replay_log
 
     rows = []
-    for index, path in task["runs"]:
+    for index, rel, want in task["runs"]:
         started = time.perf_counter()
-        row = {"index": index, "log_path": task["rel"][str(index)]}
+        path = os.path.join(task["out"], rel)
+        row = {"index": index, "log_path": rel}
+        differs = log_differs(path, want)
         try:
             report = replay_log(path)
             row["verdict"] = report.verdict
@@ -34,13 +47,30 @@ def verify_chunk(task: dict) -> list[dict]:
             row["where"] = (first.where() or None) if first is not None else None
             row["field"] = (first.field or None) if first is not None else None
             row["ulps"] = None if first is None else first.ulps
-            row["detail"] = (first.detail or None) if first is not None else (report.damage or None)
+            why = first.detail if first is not None else report.damage or report.truncated_detail
+            row["detail"] = "; ".join(x for x in (why, *report.notes) if x) or None
         except IsaacError as exc:  # not a readable log, another physics version: its verdict
             row.update(verdict="not replayed", steps_compared=0)
             row["detail"] = " ".join(str(exc).split())
+        if differs is not None and os.path.isfile(path):
+            row["differs"] = differs
+            row["file_sha256"] = sha256_of(path)
         row["wall_time_s"] = time.perf_counter() - started
         rows.append(row)
     return rows
+
+
+def _wrong_log(row: dict, owner: dict) -> None:
+    """Make `row` (from `verify_chunk`) a `wrong log` verdict when its file is not its row's
+    log, naming the run whose log the file is (`owner`: {log_sha256: index}) when it is one."""
+    differs = row.pop("differs", None)
+    sha = row.pop("file_sha256", None)
+    if differs is None:
+        return
+    whose = f" (it is run {owner[sha]}'s log)" if sha in owner else ""
+    replayed = row["verdict"] + (f": {row['detail']}" if row["detail"] else "")
+    row["detail"] = f"not the log the row names: {differs}{whose}; replayed: {replayed}"
+    row["verdict"] = WRONG_LOG
 
 
 def verify(out_dir: str, *, client=None, scheduler=None, workers=None, progress=False, note=None):
@@ -65,9 +95,16 @@ def verify(out_dir: str, *, client=None, scheduler=None, workers=None, progress=
         raise SweepError("no such file (is the folder a sweep's output?)", source=source) from None
     except Exception as exc:  # noqa: BLE001 - whatever pyarrow raises for a damaged table
         raise SweepError(f"not a readable table: {exc}", source=source) from None
-    logged = [(r["index"], r.get("log_path")) for r in runs if r.get("log_path")]
+    missing = [c for c in ("index", "log_path", "log_sha256") if runs and c not in runs[0]]
+    if missing:
+        raise SweepError(
+            f"not a sweep's table of logs: no {', '.join(missing)} column (record: none?)",
+            source=source,
+        )
+    logged = [(r["index"], r["log_path"], r["log_sha256"]) for r in runs if r["log_path"]]
     if not logged:
         raise SweepError("no run of this sweep has a log (record: none?)", source=source)
+    owner = {sha: index for index, _, sha in logged if sha}
     out_dir = os.path.abspath(out_dir)
     own = client is None
     cluster = None
@@ -78,10 +115,10 @@ def verify(out_dir: str, *, client=None, scheduler=None, workers=None, progress=
             client, cluster = start_cluster(scheduler, workers)
         n_workers = max(1, len(client.scheduler_info().get("workers", {})))
         size = max(1, min(20, -(-len(logged) // (n_workers * 8))))
-        rel = {str(i): p for i, p in logged}
-        paths = [(i, os.path.join(out_dir, p)) for i, p in logged]
-        lead = {"runs": paths[:1], "rel": rel}
-        tasks = [{"runs": paths[k : k + size], "rel": rel} for k in range(1, len(paths), size)]
+        lead = {"runs": logged[:1], "out": out_dir}
+        tasks = [
+            {"runs": logged[k : k + size], "out": out_dir} for k in range(1, len(logged), size)
+        ]
         if progress:
             from tqdm import tqdm
 
@@ -109,6 +146,8 @@ def verify(out_dir: str, *, client=None, scheduler=None, workers=None, progress=
         if cluster is not None:
             cluster.close()
     rows.sort(key=lambda r: r["index"])
+    for row in rows:
+        _wrong_log(row, owner)
     schema = pa.schema(
         [
             pa.field("index", pa.int64()),

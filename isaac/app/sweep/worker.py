@@ -71,6 +71,23 @@ def tmp_path(out_dir: str, rel: str) -> str:
     return os.path.join(out_dir, TMP_DIR, os.path.basename(rel))
 
 
+def log_differs(path: str, want: str | None) -> str | None:
+    """Why the file at `path` is not the log a row names by its sha256 `want` (hex), in a few
+    words; None when it is. The one check of a log against its row: a resume keeps a run only
+    when it passes (`row_is_complete`), and `isaac sweep verify` replays only logs that pass."""
+    if want is None:
+        return "the row names no sha256 for it"
+    try:
+        got = sha256_of(path)
+    except FileNotFoundError:
+        return "no such file"
+    except OSError as exc:
+        return f"not readable: {exc.strerror or exc}"
+    if got != want:
+        return f"its sha256 is {got[:12]}..., the row names {want[:12]}..."
+    return None
+
+
 def row_is_complete(out_dir: str, row: dict) -> bool:
     """Whether `row`'s logs are there and are the files the row describes (sha256). A log that
     is not under its final name yet but finished in logs/.tmp with that sha256 (its chunk was
@@ -81,15 +98,12 @@ def row_is_complete(out_dir: str, row: dict) -> bool:
             continue
         path = os.path.join(out_dir, rel)
         want = row.get("log_sha256" if kind == "mcap" else "rrd_sha256")
-        try:
-            if sha256_of(path) == want:
-                continue
-        except OSError:
-            pass
+        if log_differs(path, want) is None:
+            continue
         tmp = tmp_path(out_dir, rel)
+        if log_differs(tmp, want) is not None:
+            return False
         try:
-            if sha256_of(tmp) != want:
-                return False
             publish_logs(out_dir, [(tmp, path)], each=True)
         except OSError:
             return False
