@@ -271,3 +271,13 @@ def test_paths_through_a_body_kept_apart_are_left_out_with_or_without_bounding_b
         kept_apart += int((wall & wall_apart).sum() + (floor & floor_apart).sum())
     assert hits > 100 and kept_apart > 20
     assert (m._boxes is not None) == prefilter
+
+
+def test_a_table_without_the_log_columns_is_refused_in_one_line(tmp_path, capsys):
+    import pyarrow as pa
+
+    pq.write_table(pa.table({"log_path": ["logs/run-000000.mcap"]}), tmp_path / "runs.parquet")
+    status = main(["sweep", "verify", str(tmp_path), "--workers", "1"])
+    err = capsys.readouterr().err
+    assert status == 2 and err.count("\n") == 1, err
+    assert "runs.parquet" in err and "no column index, log_sha256" in err

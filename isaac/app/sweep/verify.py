@@ -98,7 +98,7 @@ def verify(out_dir: str, *, client=None, scheduler=None, workers=None, progress=
     missing = [c for c in ("index", "log_path", "log_sha256") if runs and c not in runs[0]]
     if missing:
         raise SweepError(
-            f"not a sweep's table of logs: no {', '.join(missing)} column (record: none?)",
+            f"not a sweep's table of logs: it has no column {', '.join(missing)} (record: none?)",
             source=source,
         )
     logged = [(r["index"], r["log_path"], r["log_sha256"]) for r in runs if r["log_path"]]
