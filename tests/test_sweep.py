@@ -844,7 +844,7 @@ def test_verify_replays_every_log_and_names_the_run_and_step_of_a_one_ulp_edit(t
     rows = verify(str(out), client=client).to_pylist()
     # not the file its row names (sha256), and replayed all the same
     assert [r["verdict"] for r in rows] == ["identical", "identical", "wrong log", "identical"]
-    assert "replayed: diverged" in rows[2]["detail"] and rows[2]["first_divergent_step"] == 12
+    assert "the replay: diverged" in rows[2]["detail"] and rows[2]["first_divergent_step"] == 12
     # an edit the table was made to agree with: the replay alone finds it
     table = pq.read_table(out / "runs.parquet")
     shas = table.column("log_sha256").to_pylist()

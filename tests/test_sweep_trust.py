@@ -93,7 +93,8 @@ def test_two_swapped_logs_are_each_a_wrong_log_naming_whose_log_it_is(
     status, text, rows = _verify(capsys, cluster, out)
     assert status == 1
     assert [r["verdict"] for r in rows] == ["wrong log", "wrong log", "identical"]
-    assert "(it is run 1's log)" in rows[0]["detail"] and "replayed: identical" in rows[0]["detail"]
+    assert "(it is run 1's log)" in rows[0]["detail"]
+    assert "the replay: identical" in rows[0]["detail"]
     assert "(it is run 0's log)" in rows[1]["detail"]
     assert "run 0 (logs/run-000000.mcap): wrong log" in text
     assert "run 1 (logs/run-000001.mcap): wrong log" in text and "run 2 (" not in text

@@ -69,7 +69,7 @@ def _wrong_log(row: dict, owner: dict) -> None:
         return
     whose = f" (it is run {owner[sha]}'s log)" if sha in owner else ""
     replayed = row["verdict"] + (f": {row['detail']}" if row["detail"] else "")
-    row["detail"] = f"not the log the row names: {differs}{whose}; replayed: {replayed}"
+    row["detail"] = f"not the log the row names: {differs}{whose}; the replay: {replayed}"
     row["verdict"] = WRONG_LOG
 
 

@@ -74,7 +74,8 @@ def tmp_path(out_dir: str, rel: str) -> str:
 def log_differs(path: str, want: str | None) -> str | None:
     """Why the file at `path` is not the log a row names by its sha256 `want` (hex), in a few
     words; None when it is. The one check of a log against its row: a resume keeps a run only
-    when it passes (`row_is_complete`), and `isaac sweep verify` replays only logs that pass."""
+    when it passes (`row_is_complete`), and `isaac sweep verify` calls any other file a `wrong
+    log`."""
     if want is None:
         return "the row names no sha256 for it"
     try:
