@@ -62,31 +62,16 @@ def columns(metrics, final_bodies) -> list:
     return out
 
 
-def _kept_apart(model, c: int) -> np.ndarray | None:
-    """The bodies the broad phase never pairs with concrete body `c` (sorted indices; None
-    when there are none): those the collision filter keeps from it
-    (`isaac.collision_filter.collides`) and those a joint connects to it without
-    `collide_connected` (`model.no_collide`, the broad phase's own keys)."""
-    from isaac.collision_filter import collides
-
-    n = model.n_bodies
-    others = np.arange(n)
-    ok = collides(
-        model.category[c], model.mask[c], model.group[c], model.category, model.mask, model.group
-    )
-    if model.no_collide.size:
-        keys = np.minimum(others, c) * n + np.maximum(others, c)
-        ok &= ~np.isin(keys, model.no_collide)
-    ok[c] = True  # itself: not a moving body
-    apart = np.flatnonzero(~ok)
-    return apart if apart.size else None
-
-
 class Measure:
     """The metrics of one run, fed the initial record (`__init__`) and then each batch."""
 
     def __init__(self, sim, metrics, final_bodies) -> None:
-        from isaac.app.tradeoff.trajectory import _concrete_discs, _concrete_planes
+        from isaac.app.tradeoff.trajectory import (
+            _concrete_comes_and_goes,
+            _concrete_discs,
+            _concrete_planes,
+            _kept_apart,
+        )
 
         self.metrics = tuple(metrics)
         self.final_bodies = tuple(final_bodies)
@@ -104,22 +89,14 @@ class Measure:
         self.planes = _concrete_planes(self.model, sim.state) if tunneling else []
         self.discs = _concrete_discs(self.model, sim.state) if tunneling else []
         # the concrete bodies of `planes` and of `discs`, in their orders, and the bodies each
-        # may not collide with (None: it may with every one)
+        # may not collide with (None: it may with every one; the rule `isaac tradeoff` applies)
         model = self.model
         self.plane_bodies = np.flatnonzero(model.concrete & (model.vertex_count > 1))
         self.disc_bodies = np.flatnonzero(model.concrete & (model.vertex_count == 1))
-        # (model.filtered: some filter is not the default, or a joint keeps a pair apart)
-        pairs = tunneling and model.filtered
-        self.plane_apart = [_kept_apart(model, c) if pairs else None for c in self.plane_bodies]
-        self.disc_apart = [_kept_apart(model, c) if pairs else None for c in self.disc_bodies]
+        self.plane_apart = [_kept_apart(model, c) if tunneling else None for c in self.plane_bodies]
+        self.disc_apart = [_kept_apart(model, c) if tunneling else None for c in self.disc_bodies]
         # some concrete body enters or leaves: a path counts only while it exists
-        self.timed_concrete = (
-            tunneling
-            and model.timed
-            and bool(
-                np.any(((model.enters_at > 0.0) | np.isfinite(model.leaves_at)) & model.concrete)
-            )
-        )
+        self.timed_concrete = tunneling and _concrete_comes_and_goes(model)
         self.pairwise = self.timed_concrete or any(
             x is not None for x in self.plane_apart + self.disc_apart
         )

@@ -23,8 +23,8 @@ class Trajectory:
     exists: (S, n) bool. max_depth: largest penetration (m) any contact had during the run.
     max_joint_error: the largest position error (m) a joint was left with after a step's
     position pass (`JointRows.error`, column 0), 0 without joints. tunneled: names of bodies
-    whose centre crossed a concrete body. error: why it stopped early (a SimulationError
-    message), else None.
+    whose centre crossed a concrete body that could have stopped it (`_Obstacles`). error: why
+    it stopped early (a SimulationError message), else None.
     """
 
     times: np.ndarray
@@ -107,6 +107,81 @@ def _crossed_concrete(planes, p0: np.ndarray, p1: np.ndarray, discs=()) -> np.nd
     return hit
 
 
+def _kept_apart(model, c: int) -> np.ndarray | None:
+    """The bodies the broad phase never pairs with concrete body `c` (sorted indices; None
+    when there are none): those the collision filter keeps from it
+    (`isaac.collision_filter.collides`) and those a joint connects to it without
+    `collide_connected` (`model.no_collide`, the broad phase's own keys). A path through `c`
+    of one of them is no tunnel: nothing was there to stop it (a blade on an axle through a
+    concrete hub, a body whose mask leaves out a concrete ledge)."""
+    from isaac.collision_filter import collides
+
+    if not model.filtered:  # every filter the default, no joint keeps a pair apart
+        return None
+    n = model.n_bodies
+    others = np.arange(n)
+    ok = collides(
+        model.category[c], model.mask[c], model.group[c], model.category, model.mask, model.group
+    )
+    if model.no_collide.size:
+        keys = np.minimum(others, c) * n + np.maximum(others, c)
+        ok &= ~np.isin(keys, model.no_collide)
+    ok[c] = True  # itself: not a moving body
+    apart = np.flatnonzero(~ok)
+    return apart if apart.size else None
+
+
+def _concrete_comes_and_goes(model) -> bool:
+    """Whether some concrete body enters after time 0 or leaves (`enters_at`, `leaves_at`): a
+    path then crosses it only in the steps it exists at both ends of, as the broad phase pairs
+    no absent body."""
+    if not model.timed:
+        return False
+    timed = (model.enters_at > 0.0) | np.isfinite(model.leaves_at)
+    return bool(np.any(timed & model.concrete))
+
+
+class _Obstacles:
+    """The concrete bodies a centre's path is clipped against, each with the moving bodies it
+    could have stopped (`_kept_apart`, `_concrete_comes_and_goes`: the rule the sweep's
+    `tunneled` metric applies too). Concrete bodies never move: built from the first state."""
+
+    def __init__(self, model, state) -> None:
+        self.planes = _concrete_planes(model, state)
+        self.discs = _concrete_discs(model, state)
+        polygons = np.flatnonzero(model.concrete & (model.vertex_count > 1))
+        circles = np.flatnonzero(model.concrete & (model.vertex_count == 1))
+        # one (planes, discs) per concrete body, and its index
+        self.each = [([p], []) for p in self.planes] + [([], [d]) for d in self.discs]
+        self.bodies = np.concatenate([polygons, circles])
+        self.timed = _concrete_comes_and_goes(model)
+        self.may_hit = []  # (n,) bool per concrete body: the bodies it could have stopped
+        for c in self.bodies:
+            may = np.ones(model.n_bodies, dtype=bool)
+            apart = _kept_apart(model, int(c))
+            if apart is not None:
+                may[apart] = False
+            self.may_hit.append(None if apart is None else may)
+        self.pairwise = self.timed or any(m is not None for m in self.may_hit)
+
+    def crossed(self, p0, p1, e0, e1) -> np.ndarray:
+        """(n,) bool: body i's centre went from p0[i] to p1[i] (m, world) through a concrete
+        body that could have stopped it, one existing at both ends of the step (e0, e1: (n,)
+        existence before and after)."""
+        if not self.pairwise:  # every pair may collide: one call
+            return _crossed_concrete(self.planes, p0, p1, self.discs)
+        hit = np.zeros(p0.shape[0], dtype=bool)
+        for (planes, discs), c, may in zip(self.each, self.bodies, self.may_hit):
+            if self.timed and not (e0[c] and e1[c]):
+                continue
+            crossed = _crossed_concrete(planes, p0, p1, discs)
+            hit |= crossed if may is None else crossed & may
+        return hit
+
+    def __bool__(self) -> bool:
+        return bool(self.each)
+
+
 def sample_times(duration: float, sample_dt: float) -> np.ndarray:
     """0, sample_dt, 2 sample_dt, ... up to `duration` (s)."""
     count = math.floor(duration / sample_dt + 1e-9)
@@ -118,7 +193,8 @@ def simulate(scene: Scene, times: np.ndarray, *, check: bool = True) -> Trajecto
     interpolation between the two steps around a time that is not a multiple of dt).
 
     With `check`, also tracks the largest contact depth, the largest joint error and tunneling
-    through concrete bodies.
+    through the concrete bodies that could have stopped each body (`_Obstacles`: not one the
+    collision filter or a joint keeps from it, nor one absent at either end of the step).
     A SimulationError ends the run: samples after it are NaN and `error` says why.
     """
     from isaac.engine.simulation import Simulation
@@ -139,8 +215,7 @@ def simulate(scene: Scene, times: np.ndarray, *, check: bool = True) -> Trajecto
     lo = np.floor(where + 1e-9).astype(np.int64)
     frac = np.clip(where - lo, 0.0, 1.0)
     frac[np.abs(frac) < 1e-9] = 0.0
-    planes = _concrete_planes(sim.model, sim.state) if check else []
-    discs = _concrete_discs(sim.model, sim.state) if check else []
+    obstacles = _Obstacles(sim.model, sim.state) if check else None
     movable = ~sim.model.concrete
     tunneled = np.zeros(n, dtype=bool)
     prev = sim.record()
@@ -167,10 +242,11 @@ def simulate(scene: Scene, times: np.ndarray, *, check: bool = True) -> Trajecto
                 if rec.joints is not None and len(rec.joints.error):
                     worst = float(rec.joints.error[:, 0].max())
                     out.max_joint_error = max(out.max_joint_error, worst)
-                if planes or discs:
+                if obstacles:
                     alive = movable & rec.exists & prev.exists
-                    crossed = _crossed_concrete(planes, prev.position, rec.position, discs)
-                    tunneled |= crossed & alive
+                    tunneled |= alive & obstacles.crossed(
+                        prev.position, rec.position, prev.exists, rec.exists
+                    )
             while k < s_count and lo[k] <= step_index:
                 if lo[k] == step_index:
                     if frac[k] == 0.0:
