@@ -383,8 +383,16 @@ ERRORS = [
         "coincident_anchors_no_length",
         "  - {type: distance, bodies: [ceiling, chassis], anchor_a: [1, 1], anchor_b: [1, 1]}\n",
         J,
-        "joints[0]",
-        "give length",
+        "joints[0].anchor_b",
+        "anchors coincide at step 0",
+    ),
+    (  # a length does not help: there is no line to hold it along
+        "coincident_anchors_with_length",
+        "  - type: distance\n    bodies: [wheel_left, chassis]\n    anchor_a: [1, 1]\n"
+        "    anchor_b: [1, 1]\n    length: 0.5\n",
+        J + 3,
+        "joints[0].anchor_b",
+        "move anchor_b away from anchor_a",
     ),
     (
         "rest_length_beyond_max",
@@ -614,6 +622,10 @@ def _random_scene(rng):
             t = rng.uniform(-4.0, 4.0)
             spec["axis"] = checks.unit_axis((math.cos(t), math.sin(t) * rng.uniform(0.1, 9.0)))
         if kind == "distance":
+            bodies = base.bodies
+            if checks.coincident_anchors(bodies[a], spec["local_a"], bodies[b], spec["local_b"]):
+                # refused (no line to act along): move b's anchor 1 m along its body's x
+                spec["local_b"] = (spec["local_b"][0] + 1.0, spec["local_b"][1])
             spec["length"] = rng.choice([rng.uniform(1e-9, 1e10), 1e10, 5e-324])
             if rng.random() < 0.5:
                 spec["min_length"] = rng.choice([0.0, spec["length"] * rng.random()])

@@ -99,7 +99,7 @@ def test_awkward_floats_round_trip_bit_for_bit():
 
 def test_without_world_the_default_preset_applies():
     scene = load_scene_text(f"bodies:\n  - {{{BOX}}}\n")
-    assert load_scene_text(f"world:\nbodies:\n  - {{{BOX}}}\n") == scene
+    assert load_scene_text(f"world: {{}}\nbodies:\n  - {{{BOX}}}\n") == scene
     assert scene.world == WorldSettings()
     assert scene.world.fidelity == "balanced"
     assert all(getattr(scene.world, k) == v for k, v in PRESETS["balanced"].items())

@@ -292,7 +292,9 @@ def _sat_depth(p, q) -> float:
             nx, ny = (y1 - y0) / length, -(x1 - x0) / length
             pa = [nx * x + ny * y for x, y in p]
             pb = [nx * x + ny * y for x, y in q]
-            best = min(best, min(max(pa), max(pb)) - max(min(pa), min(pb)))
+            # how far q must move along the normal, either way, to clear p (the MTD's
+            # candidate on this axis, also when one projection holds the other)
+            best = min(best, max(pa) - min(pb), max(pb) - min(pa))
     return best
 
 
@@ -366,3 +368,51 @@ def test_the_grid_cell_quantile_is_numpys_to_the_bit():
         for scale in (1e-3, 1.0, 1e3):
             x = rng.random(n) * scale
             assert overlaps._quantile_90(x) == float(np.quantile(x, 0.9))
+
+
+# --- containment: the MTD, not the length the projections share ------------------------------
+
+
+def _depth(text: str) -> float:
+    placed = overlaps.place(load_scene_text(text).bodies)
+    (depth,) = overlaps.depths(placed, np.array([0]), np.array([1]))
+    return float(depth)
+
+
+def _two(a: str, b: str) -> str:
+    return f"world: {{gravity: [0, 0]}}\nbodies:\n  - {{name: a, {a}}}\n  - {{name: b, {b}}}\n"
+
+
+@pytest.mark.parametrize(
+    "a, b, mtd",
+    [
+        # a circle of radius 0.3 centred in a 1 m box: out by 0.5 + 0.3 along any face
+        ("shape: {box: [1, 1]}", "shape: {circle: {radius: 0.3}}", 0.8),
+        # 0.1 m off centre: out through the nearer face, 0.5 - 0.1 + 0.3
+        ("shape: {box: [1, 1]}", "shape: {circle: {radius: 0.3}}, position: [0.1, 0]", 0.7),
+        # a 0.2 x 0.4 box at (0.1, 0) inside a 2 x 2 box: out to the right, 1 - (0.1 - 0.1)
+        ("shape: {box: [2, 2]}", "shape: {box: [0.2, 0.4]}, position: [0.1, 0]", 1.0),
+        # circle in circle: r1 + r2 - d
+        (
+            "shape: {circle: {radius: 1}}",
+            "shape: {circle: {radius: 0.25}}, position: [0.5, 0]",
+            0.75,
+        ),
+        # a partial overlap is unchanged: two unit boxes 0.75 m apart overlap by 0.25
+        ("shape: {box: [1, 1]}", "shape: {box: [1, 1]}, position: [0.75, 0.1]", 0.25),
+    ],
+)
+def test_the_depth_of_a_body_held_inside_another_is_its_minimum_translation_distance(a, b, mtd):
+    assert _depth(_two(a, b)) == pytest.approx(mtd, abs=1e-12)
+    assert _depth(_two(b, a)) == pytest.approx(mtd, abs=1e-12)  # either order
+
+
+def test_a_huge_circle_swallowing_the_ground_is_reported_by_its_mtd():
+    text = (
+        "bodies:\n  - {name: ground, shape: {box: [20, 1]}, position: [0, -0.5], concrete: true}\n"
+        "  - {name: huge, shape: {circle: {radius: 500000}}}\n"
+    )
+    # the ground's top (y = 0) must go below the circle's bottom (y = -5e5)
+    assert _depth(text) == pytest.approx(5e5, rel=1e-12)
+    (line,) = _warnings(text)
+    assert "'ground' and 'huge' by 5e+05 m" in line

@@ -28,6 +28,7 @@ import numpy as np
 from isaac.scene import circle, polygon
 from isaac.scene.limits import (
     AXIS_TOLERANCE,
+    COINCIDENT_ANCHORS,
     FILTER_BITS,
     MAX_ANCHOR,
     MAX_COORDINATE,
@@ -49,6 +50,7 @@ from isaac.scene.limits import (
 )
 from isaac.scene.reader import shown, valid_name
 from isaac.scene.spec import JOINT_KINDS, BodySpec, JointSpec
+from isaac.trig import sin_cos
 
 MIN_NORMAL = sys.float_info.min  # 2.2250738585072014e-308, the smallest normal float64
 
@@ -283,6 +285,36 @@ def unit_axis(axis: tuple[float, float]) -> tuple[float, float]:
     return (x / n, y / n)
 
 
+def to_world(body: BodySpec, local: tuple[float, float]) -> tuple[float, float]:
+    """`body`'s point `local` (m, its frame) in the world at step 0: position + R(angle) local."""
+    s, c = sin_cos(body.angle)
+    return (
+        body.position[0] + (c * local[0] - s * local[1]),
+        body.position[1] + (s * local[0] + c * local[1]),
+    )
+
+
+def coincident_anchors(body_a: BodySpec, local_a, body_b: BodySpec, local_b) -> str | None:
+    """Why a distance joint with anchors `local_a` on `body_a` and `local_b` on `body_b` (m,
+    each body's frame) cannot be, or None: its anchors coincide at step 0 (within
+    COINCIDENT_ANCHORS of the largest coordinate, at least 1 m). A distance joint acts along the
+    line between its anchors; with none, the engine falls back on the world x axis and a rigid
+    rod holds the anchors together, not `length` apart (Box2D has no axis there either):
+    refused, whatever `length` says."""
+    xa, ya = to_world(body_a, local_a)
+    xb, yb = to_world(body_b, local_b)
+    gap = math.sqrt((xb - xa) * (xb - xa) + (yb - ya) * (yb - ya))
+    coordinates = (*body_a.position, *body_b.position, *local_a, *local_b, xa, ya, xb, yb)
+    if not gap <= COINCIDENT_ANCHORS * max(1.0, *map(abs, coordinates)):  # NaN: not this check
+        return None
+    return (
+        f"the distance joint's anchors coincide at step 0 (both at [{xa!r}, {ya!r}] in the "
+        f"world, {gap!r} m apart): it acts along the line between them, which they do not give; "
+        "move anchor_b away from anchor_a (the length is then held along that line), or join "
+        "the bodies with a revolute joint to hold the two points together"
+    )
+
+
 def joint_solver_problem(solver: str, joints) -> str | None:
     """Why a world with solver `solver` cannot hold `joints`, or None."""
     return SEED_JOINTS if len(joints) and solver == "seed" else None
@@ -303,7 +335,8 @@ def joint_problem(bodies, joint: JointSpec) -> tuple[str, str] | None:
 
     The rules of docs/scene-format.md, `joints:`: a valid name and kind; two different bodies
     (indices into `bodies`), not both concrete; anchors (body frames) within MAX_ANCHOR; the
-    fields its kind does not use at their defaults; reference angle, lengths (min <= length <=
+    fields its kind does not use at their defaults; a distance joint's anchors apart at step 0
+    (`coincident_anchors`); reference angle, lengths (min <= length <=
     max), stiffness, damping (only with stiffness), limits (both or neither, lower <= upper,
     revolute within [-pi, pi]), motor (speed and a max >= 0, both or neither) in range; a
     prismatic axis of unit length (within AXIS_TOLERANCE); collide_connected a bool.
@@ -347,6 +380,10 @@ def joint_problem(bodies, joint: JointSpec) -> tuple[str, str] | None:
         value = getattr(j, field)
         if field not in used and value != default:
             return field, f"a {j.kind} joint has no {field} (it must stay {default!r})"
+    if j.kind == "distance":
+        why = coincident_anchors(bodies[j.a], j.local_a, bodies[j.b], j.local_b)
+        if why is not None:
+            return "local_b", why
     return _kind_problem(j)
 
 

@@ -39,6 +39,10 @@ MAX_JOINT_LENGTH = 1e10  # m: distance joints' lengths, prismatic limits along t
 MAX_REFERENCE_ANGLE = 2 * MAX_SPEED  # rad: the difference of two body angles
 MIN_AXIS = 1e-9  # a prismatic axis shorter than this gives no direction
 AXIS_TOLERANCE = 1e-12  # a stored axis is unit: | |axis| - 1 | <= this
+# a distance joint's anchors at step 0 coincide when they are at most this share of the largest
+# coordinate involved (m, at least 1 m) apart: about 450 float64 roundings, far more than a
+# world point turned into a body's frame and back loses, far less than any gap meant
+COINCIDENT_ANCHORS = 1e-13
 MAX_STIFFNESS = 1e6  # Hz
 MAX_DAMPING_RATIO = 1e3
 MAX_MOTOR_TORQUE = 1e15  # N m

@@ -464,15 +464,6 @@ def to_body_frame(body: BodySpec, point: tuple[float, float]) -> tuple[float, fl
     return (c * dx + s * dy, c * dy - s * dx)
 
 
-def to_world(body: BodySpec, local: tuple[float, float]) -> tuple[float, float]:
-    """`body`'s point `local` (m, its frame) in the world at step 0: position + R(angle) local."""
-    s, c = sin_cos(body.angle)
-    return (
-        body.position[0] + (c * local[0] - s * local[1]),
-        body.position[1] + (s * local[0] + c * local[1]),
-    )
-
-
 def _joint_bodies(r: Reader, node, path: str, bodies, index_of: dict) -> tuple[int, int]:
     items = r.sequence(node, path, min_len=2, max_len=2, what="body names")
     found = []
@@ -541,7 +532,7 @@ def _read_joint(r: Reader, node, path: str, index: int, bodies, index_of: dict) 
         )  # fmt: skip
         local_a = r.pair(m["anchor_a"][1], join_path(path, "anchor_a"), -MAX_ANCHOR, MAX_ANCHOR)
         local_b = r.pair(m["anchor_b"][1], join_path(path, "anchor_b"), -MAX_ANCHOR, MAX_ANCHOR)
-        world_a, world_b = to_world(body_a, local_a), to_world(body_b, local_b)
+        world_a, world_b = checks.to_world(body_a, local_a), checks.to_world(body_b, local_b)
     else:
         if kind == "distance":
             _given(
@@ -584,6 +575,11 @@ def _read_joint(r: Reader, node, path: str, index: int, bodies, index_of: dict) 
         values.update(_read_limits(r, m, path, kind))
         values.update(_read_motor(r, m, path, kind))
     if kind == "distance":
+        # before the length: with coincident anchors none would do (checks.joint_problem
+        # refuses them too, for joints made in Python or read from a log)
+        why = checks.coincident_anchors(body_a, local_a, body_b, local_b)
+        if why is not None:
+            raise r.fail(why, m["anchor_b"][1], join_path(path, "anchor_b"))
         values.update(_read_lengths(r, m, node, path, world_a, world_b))
     if kind in ("distance", "weld"):
         stiffness = optional(r.number, m, "stiffness", path, None, 0.0, MAX_STIFFNESS, lo_open=True)
@@ -706,9 +702,10 @@ def _read_lengths(r: Reader, m: dict, node, path: str, world_a, world_b) -> dict
 
 def _read_joints(r: Reader, m: dict, bodies, world: WorldSettings) -> tuple[JointSpec, ...]:
     """The scene's `joints:` (after its bodies), checked by checks.first_joint_problem too."""
-    if "joints" not in m or scalar_or_none(m["joints"][1]) is None:
+    node = r.given(m, "joints", "", "a list of joints")
+    if node is None:
         return ()
-    key_node, node = m["joints"]
+    key_node = m["joints"][0]
     items = r.sequence(node, "joints", max_len=MAX_JOINTS, what="joints")
     if not items:
         return ()
@@ -895,17 +892,13 @@ def _read_head(r: Reader, root, default_name: str):
     """(mapping, name, world, analytic) of the scene mapping `root`."""
     m = r.mapping(root, "", _SCENE_KEYS)
     name = optional(r.name, m, "name", "", default_name)
-    world_node = m["world"][1] if "world" in m else None
-    world = _read_world(r, None if scalar_or_none(world_node) is None else world_node)
+    world = _read_world(r, r.given(m, "world", "", "a mapping of world settings"))
     analytic = None
-    if "analytic" in m and scalar_or_none(m["analytic"][1]) is not None:
-        if not isinstance(m["analytic"][1], MappingNode):
-            raise r.fail(
-                f"expected a mapping, got {describe(m['analytic'][1])}",
-                m["analytic"][1],
-                "analytic",
-            )
-        analytic = r.plain(m["analytic"][1], "analytic")
+    node = r.given(m, "analytic", "", "a mapping")
+    if node is not None:
+        if not isinstance(node, MappingNode):
+            raise r.fail(f"expected a mapping, got {describe(node)}", node, "analytic")
+        analytic = r.plain(node, "analytic")
     return m, name, world, analytic
 
 
@@ -929,8 +922,9 @@ def _read_scene(r: Reader, root, default_name: str) -> Scene:
         origin[spec.name] = (path, line_of(node))
         bodies.append(spec)
 
-    if "bodies" in m and scalar_or_none(m["bodies"][1]) is not None:
-        items = r.sequence(m["bodies"][1], "bodies", max_len=MAX_BODIES, what="bodies")
+    node = r.given(m, "bodies", "", "a list of bodies")
+    if node is not None:
+        items = r.sequence(node, "bodies", max_len=MAX_BODIES, what="bodies")
         for i, item in enumerate(items):
             path = f"bodies[{i}]"
             spec = _read_body(r, item, path, i)
@@ -945,8 +939,9 @@ def _read_scene(r: Reader, root, default_name: str) -> Scene:
                 for key_node, value_node in item.value:
                     if key_node.value == "friction":
                         friction_given.append((line_of(value_node), join_path(path, "friction")))
-    if "generators" in m and scalar_or_none(m["generators"][1]) is not None:
-        items = r.sequence(m["generators"][1], "generators")
+    node = r.given(m, "generators", "", "a list of generators")
+    if node is not None:
+        items = r.sequence(node, "generators")
         for i, item in enumerate(items):
             path = f"generators[{i}]"
             first = len(bodies)

@@ -10,8 +10,10 @@ Outline:
         thickness (the smallest width, as the engine's model computes it);
     bounding-box pairs from a uniform grid (box_pairs says why not a one-axis sweep): boxes
         sharing a cell are candidates, those whose boxes meet are the pairs;
-    SAT on those pairs over both polygons' edge normals: depth = the smallest overlap of the
-        two projections over all axes (the minimum translation distance, m; <= 0 separated).
+    SAT on those pairs over both polygons' edge normals: depth = over all axes, the smallest
+        distance one projection must move along the axis, either way, to clear the other (the
+        minimum translation distance, m; <= 0 separated). Not the length the two projections
+        share: when one holds the other (a marble in a box) that is the inner one's width.
         A circle is its centre (one vertex) with a radius that widens its projections; with
         circles, the axes from each body's vertices to the other's circle centre are tested
         too (the axis a circle and a polygon's vertex region need), which for convex shapes
@@ -61,7 +63,9 @@ def place(bodies) -> Placement:
     """The Placement of `bodies` (validated BodySpecs), grouped by vertex count so each group is
     one set of array operations."""
     n = len(bodies)
-    width = max((len(b.vertices) for b in bodies), default=3)
+    # at least one column: a circle is its centre, one vertex (a scene of circles alone has no
+    # polygon to set the width)
+    width = max(max((len(b.vertices) for b in bodies), default=3), 1)
     vertices = np.zeros((n, width, 2))
     normals = np.zeros((n, width, 2))
     thickness = np.zeros(n)
@@ -228,9 +232,11 @@ def _chunks(count: int, width: int):
 
 
 def depths(placed: Placement, a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """(p,) SAT depth (m) of each pair (a[k], b[k]): the smallest overlap of the two polygons'
-    projections over both polygons' edge normals, the minimum translation distance when
-    positive; zero or negative (the gap along the best axis) when they do not overlap."""
+    """(p,) SAT depth (m) of each pair (a[k], b[k]): over both polygons' edge normals (and,
+    with circles, the vertex-to-centre axes), the smallest min(max_a - min_b, max_b - min_a)
+    of the two projections, which is the minimum translation distance when positive, also when
+    one body holds the other (a circle of radius r centred in a box of half-width h: h + r);
+    zero or negative (the gap along the best axis) when they do not overlap."""
     out = np.empty(len(a))
     width = placed.vertices.shape[1]
     rounded = bool(placed.radius.any())
@@ -245,9 +251,13 @@ def depths(placed: Placement, a: np.ndarray, b: np.ndarray) -> np.ndarray:
         pb = axes[:, :, None, 0] * vb[:, None, :, 0] + axes[:, :, None, 1] * vb[:, None, :, 1]
         ra = placed.radius[a[part], None]
         rb = placed.radius[b[part], None]
-        overlap = np.minimum(pa.max(axis=2) + ra, pb.max(axis=2) + rb) - np.maximum(
-            pa.min(axis=2) - ra, pb.min(axis=2) - rb
-        )
+        # how far b must move along +axis (a's top past b's bottom) or -axis (b's top past a's
+        # bottom) to clear a: the smaller of the two, not the overlap of the two intervals,
+        # which under containment (a circle in a box) is the inner body's width, less than the
+        # MTD. For intervals that only partly overlap, or not at all, the two are the same.
+        lo_a, hi_a = pa.min(axis=2) - ra, pa.max(axis=2) + ra
+        lo_b, hi_b = pb.min(axis=2) - rb, pb.max(axis=2) + rb
+        overlap = np.minimum(hi_a - lo_b, hi_b - lo_a)
         out[part] = overlap.min(axis=1)
     return out
 

@@ -99,8 +99,9 @@ class Refused(Exception):
         self.line = line
 
 
-def _compose(parser):
-    """The root node of the one document `parser` yields (None for an empty stream).
+def _compose(parser, document: str = "a scene"):
+    """The root node of the one document `parser` yields (None for an empty stream); `document`
+    names it in a refusal of anchors, aliases and tags ("a sweep file").
 
     Bounds, each refused as soon as it is passed: MAX_YAML_NODES nodes in all, of which at most
     MAX_SECTION_NODES under any top-level key but `bodies` (or in all, if the root is not a
@@ -134,12 +135,12 @@ def _compose(parser):
                 root = node
             continue
         if kind is yaml.AliasEvent:
-            raise Refused("YAML aliases (*name) are not allowed in a scene", _line(event))
+            raise Refused(f"YAML aliases (*name) are not allowed in {document}", _line(event))
         if event.anchor is not None:
-            raise Refused("YAML anchors (&name) are not allowed in a scene", _line(event))
+            raise Refused(f"YAML anchors (&name) are not allowed in {document}", _line(event))
         if event.tag not in (None, "!"):
             raise Refused(
-                f"YAML tags ({shown(event.tag)}) are not allowed in a scene", _line(event)
+                f"YAML tags ({shown(event.tag)}) are not allowed in {document}", _line(event)
             )
         line = event.start_mark.line + 1
         count += 1
@@ -247,8 +248,29 @@ def describe(node) -> str:
     if isinstance(value, bool):
         return "true" if value else "false"
     if isinstance(value, str):
-        return f"the string {shown(node.value)}"
+        return f"the string {shown(node.value)}{_quoted_hint(node)}"
     return f"the number {_cut(node.value)}"
+
+
+def plain_typed_text(node) -> bool:
+    """Whether `node` is a plain scalar that `scalar` keeps as text but a typed reader takes as
+    a number: a fraction (`1/120`, Reader.time) or a `0x...` (Reader.bits). Such text must be
+    written back unquoted: quoted, it is a string (isaac.app.sweep.keys writes runs' scenes)."""
+    text = node.value
+    return not node.style and bool(_FRACTION_RE.match(text) or _HEX_RE.match(text))
+
+
+def _quoted_hint(node) -> str:
+    """For a quoted scalar that would be a number, a boolean, null, a `0x...` or a fraction
+    unquoted: a note saying that quotes make it a string (the one rule: a quoted value is a
+    string, wherever it is)."""
+    if not node.style or node.style not in ("'", '"'):
+        return ""
+    text = node.value
+    plain = scalar(ScalarNode(text, node.line, None))
+    if isinstance(plain, str) and not (_HEX_RE.match(text) or _FRACTION_RE.match(text)):
+        return ""
+    return " (quoted, so a string: write it without quotes)"
 
 
 def scalar(node):
@@ -326,6 +348,22 @@ class Reader:
             what, source=self.source, line=None if node is None else line_of(node), path=path
         )
 
+    def given(self, m: dict, key: str, path: str, wanted: str):
+        """The value node of `key` in mapping `m` (`mapping`'s result at `path`), None when it is
+        left out; a null there is refused, since only leaves_at and container.height may be
+        null (docs/scene-format.md, YAML rules): `joints: null` is not "no joints"."""
+        if key not in m:
+            return None
+        node = m[key][1]
+        if isinstance(node, ScalarNode) and scalar(node) is None:
+            raise self.fail(
+                f"expected {wanted}, got null (only leaves_at and container.height may be null: "
+                f"leave `{key}:` out instead)",
+                node,
+                join_path(path, key),
+            )
+        return node
+
     # containers
     def mapping(self, node, path: str, allowed) -> dict:
         """{key: (key node, value node)} in document order; refuses duplicates and unknown keys."""
@@ -386,8 +424,8 @@ class Reader:
 
     def time(self, node, path: str, lo: float, hi: float, *, lo_open: bool = False) -> float:
         """A time (s): a number as `number` reads it, or a fraction written `N/D` (`1/120`),
-        which is kept in `as_written`."""
-        value = scalar(node) if isinstance(node, ScalarNode) else None
+        which is kept in `as_written`. Plain only: '1/120' quoted is a string, as '0.01' is."""
+        value = scalar(node) if isinstance(node, ScalarNode) and not node.style else None
         if not (isinstance(value, str) and "/" in value):
             return self.number(node, path, lo, hi, lo_open=lo_open)
         try:
@@ -422,8 +460,8 @@ class Reader:
         """A whole number of `width` bits (a collision filter's category or mask): decimal, or
         hexadecimal written `0x...`."""
         value = scalar(node) if isinstance(node, ScalarNode) else None
-        if isinstance(value, str) and _HEX_RE.match(value):
-            value = int(value, 16)
+        if isinstance(value, str) and not node.style and _HEX_RE.match(value):
+            value = int(value, 16)  # plain only: '0x2' quoted is a string, as '2' is
         if isinstance(value, bool) or not isinstance(value, int):
             raise self.fail(
                 f"expected a whole number of {width} bits (e.g. 6 or 0x0006), got {describe(node)}",
@@ -440,7 +478,8 @@ class Reader:
         if not isinstance(value, bool):
             # YAML 1.1 and Python spellings that only `true` / `false` mean here
             meant = _BOOLEAN_SPELLINGS.get(str(value).lower()) if isinstance(value, str) else None
-            hint = f" (did you mean {meant}?)" if meant else ""
+            quoted = isinstance(node, ScalarNode) and _quoted_hint(node)
+            hint = f" (did you mean {meant}?)" if meant and not quoted else ""
             raise self.fail(f"expected true or false, got {describe(node)}{hint}", node, path)
         return value
 
@@ -503,6 +542,13 @@ class Reader:
         value = scalar(node)
         if isinstance(value, float) and not math.isfinite(value):
             raise self.fail("numbers must be finite", node, path)
+        if value is None:
+            raise self.fail(
+                "null is not allowed here (only leaves_at and container.height may be null; "
+                "this free-form data holds mappings, lists, numbers, booleans and strings)",
+                node,
+                path,
+            )
         return value
 
 
@@ -516,11 +562,12 @@ def scalar_or_none(node):
     return scalar(node) if isinstance(node, ScalarNode) else node
 
 
-def compose(text: str, source: str):
-    """The node tree of YAML `text` (with line marks), or SceneError naming the line."""
+def compose(text: str, source: str, *, document: str = "a scene"):
+    """The node tree of YAML `text` (with line marks), or SceneError naming the line; `document`
+    says what the text is in the refusal of anchors, aliases and tags ("a sweep file")."""
     parser = _LOADER(text)
     try:
-        return _compose(parser)
+        return _compose(parser, document)
     except Refused as exc:
         raise SceneError(exc.what, source=source, line=exc.line) from None
     except yaml.MarkedYAMLError as exc:

@@ -49,7 +49,8 @@ HELD_MASS_RATIO = {"seed": 1.5, "fast": 50.0, "balanced": 100.0, "accurate": 100
 # the two agree)
 SLOP_SHARE = 0.05
 # pairs whose bounding boxes meet, at most; then pairs given to SAT, at most (those whose boxes
-# overlap by more than the slop on both axes: the MTD is never more than either overlap). Past
+# overlap by more than the slop on both axes: no pair left out is deeper than the slop, see
+# _placement). Past
 # either, the count says "at least": only bodies heaped on one another get near them.
 MAX_PAIRS = 2_000_000
 MAX_SAT_PAIRS = 200_000
@@ -240,7 +241,10 @@ def _placement(scene: Scene, first: np.ndarray, last: np.ndarray) -> list[str]:
     slop = np.minimum(
         scene.world.slop, SLOP_SHARE * np.minimum(placed.thickness[a], placed.thickness[b])
     )
-    # the MTD is never more than the boxes' overlap on either axis: SAT only beyond the slop
+    # SAT only where the boxes overlap by more than the slop on both axes. Where they overlap
+    # by less on one axis, neither box holds the other's span along it (a span held is at least
+    # the inner body's thickness, > 20 slops), so moving one body that little along that axis
+    # parts the boxes: the MTD is at most the slop
     box_overlap = np.minimum(placed.hi[a], placed.hi[b]) - np.maximum(placed.lo[a], placed.lo[b])
     asked &= box_overlap.min(axis=1) > slop
     ask = np.flatnonzero(asked)

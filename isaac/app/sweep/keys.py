@@ -24,6 +24,7 @@ from isaac.scene.reader import (
     ScalarNode,
     SequenceNode,
     join_path,
+    plain_typed_text,
     scalar,
 )
 
@@ -307,7 +308,7 @@ class _Emitter:
             self.parts.append("]")
         else:
             value = scalar(node)
-            if isinstance(value, str):
+            if isinstance(value, str) and not plain_typed_text(node):
                 self.parts.append(_quoted(node.value))
             elif value is None:
                 self.parts.append("null")

@@ -268,7 +268,9 @@ def load_sweep(path) -> Sweep:
     the scene's SceneError for a scene that is invalid as it stands)."""
     source = str(path)
     text = read_bytes(source, "the sweep file", source)
-    root = compose(text, source)
+    # the scene's YAML rules, anchors and aliases refused too: a sweep file is small, and a
+    # refusal naming it says which of the two files to change
+    root = compose(text, source, document="a sweep file")
     r = Reader(source)
     if root is None:
         raise SweepError(
