@@ -123,6 +123,24 @@ def batch_energies(model, before: StepRecord, batch, gravity) -> tuple[np.ndarra
     )
 
 
+def record_energies(model, before: StepRecord, record: StepRecord, gravity) -> tuple[float, float]:
+    """(total, entered) of one record after `before` (J; `batch_energies` of a batch of one)."""
+    one = tuple(
+        np.asarray(getattr(record, f))[None]
+        for f in ("position", "velocity", "angular_velocity", "exists")
+    )
+    total, entered = _batch_energies(
+        model.mass,
+        model.inertia,
+        np.asarray(model.concrete, dtype=bool),
+        float(gravity[0]),
+        float(gravity[1]),
+        (before.position, before.velocity, before.angular_velocity, before.exists),
+        *one,
+    )
+    return float(total[0]), float(entered[0])
+
+
 def summary(model, record: StepRecord, gravity) -> Summary:
     """Energies and momenta of a record in one pass (see Summary for units and frames)."""
     ke, pe, px, py, ang = _sums(

@@ -35,8 +35,8 @@ import numpy as np
 ENERGY_TOLERANCE = 0.5
 
 FIX_HINT = (
-    "the step cannot hold this scene: add sub-steps (world.substeps: 4, or fidelity: accurate) "
-    "or a smaller world.dt"
+    "the step cannot hold this scene: add sub-steps (world.substeps; `isaac check` says how "
+    "many a joint needs) or a smaller world.dt"
 )
 
 
