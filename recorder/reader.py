@@ -201,6 +201,9 @@ class LogSummary:
     max_joint_error: float = 0.0
     max_joint_error_step: int | None = None
     max_joint_error_joint: int | None = None
+    # the energy check over the steps read (`isaac.engine.energy_check.EnergyCheck`), None
+    # without /stats
+    energy_check: object = None
 
 
 def _sized(msg: dict, topic: str, key: str, n: int, what: str):
@@ -577,6 +580,8 @@ class LogReader:
     def summary(self) -> LogSummary:
         """Counts and extremes over every readable step (one pass over the file)."""
         s = LogSummary()
+        totals, entered = [], []
+        before = first = None
         for logged in self.steps():
             r = logged.record
             s.steps += 1
@@ -602,9 +607,47 @@ class LogReader:
                 if s.energy_start is None:
                     s.energy_start = logged.stats["total_energy"]
                 s.energy_end = logged.stats["total_energy"]
+                if first is None:
+                    first = logged
+                else:
+                    totals.append(s.energy_end)
+                    entered.append(self._entered(logged, before))
+                before = logged
             if logged.world.step == r.step:
                 s.world_changes += 1
+        if first is not None:
+            s.energy_check = self._energy_check(first, totals, entered)
         return s
+
+    def _entered(self, logged: LoggedStep, before: LoggedStep) -> float:
+        """Energy (J) bodies entering at this step brought in, less that of bodies leaving
+        (`isaac.engine.diagnostics.record_energies`, called only when existence changed)."""
+        if np.array_equal(logged.record.exists, before.record.exists):
+            return 0.0
+        from isaac.engine import diagnostics
+
+        g = self.settings.get("gravity", (0.0, 0.0))
+        return diagnostics.record_energies(logged.world, before.record, logged.record, g)[1]
+
+    def _energy_check(self, first: LoggedStep, totals: list, entered: list):
+        """The energy check of the run the log holds (`isaac.engine.energy_check`), from its
+        `/stats` energies; the scale from the first step's `/world` table and state."""
+        from types import SimpleNamespace
+
+        from isaac.engine.energy_check import EnergyCheck
+
+        w = first.world
+        # a body's bounding radius (m): its farthest vertex, or a circle's radius
+        radius = np.maximum(
+            np.max(np.hypot(*np.moveaxis(w.vertices_local, -1, 0)), axis=1), w.circle_radius
+        )
+        model = SimpleNamespace(mass=w.mass, inertia=w.inertia, concrete=w.concrete, radius=radius)
+        motors = any(j.get("motor") for j in w.joints)
+        g = self.settings.get("gravity", (0.0, 0.0))
+        start = first.stats["total_energy"]
+        check = EnergyCheck.of(model, first.record, g, start, motors=motors)
+        check.add(totals, entered)
+        return check
 
 
 def _settings(path: str, metadata: dict) -> tuple[dict, float]:

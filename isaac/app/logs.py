@@ -148,6 +148,10 @@ def _inspect(args: argparse.Namespace) -> int:
         print(
             f"energy   start {_g(s.energy_start)} J, end {_g(s.energy_end)} J (kinetic + potential)"
         )
+    if s.energy_check is not None:
+        print(f"         {s.energy_check.summary()}")
+        if s.energy_check.flagged:
+            print(f"isaac inspect: warning: {s.energy_check.warning()}", file=sys.stderr)
     end = log.end
     damage = log.damage
     if damage is not None:

@@ -393,6 +393,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     recorder = None
     first = last = sim.record()
     energy_start = _energy(sim, first)
+    energy = _energy_check(sim, first, energy_start)
     contacts_seen = 0
     max_depth = 0.0
     progress = None
@@ -435,6 +436,7 @@ def cmd_run(args: argparse.Namespace) -> int:
                 recorder.write_batch(batch)
             if first_step_at is None:  # (its recording loads or compiles the packer too)
                 first_step_at = time.perf_counter()
+            energy.add(*_batch_energies(sim, last, batch))
             last = batch.record(batch.steps - 1)
             depth = batch.all_contacts().depth
             if len(depth):
@@ -501,6 +503,7 @@ def cmd_run(args: argparse.Namespace) -> int:
         )
     )
     print(f"  energy (kinetic + potential) start {energy_start:.6g} J, end {energy_end:.6g} J")
+    print(f"  {energy.summary()}")
     if recorder:
         print(
             f"  recording: files finished {finished_files:.2f} s after the last step (the "
@@ -518,6 +521,9 @@ def cmd_run(args: argparse.Namespace) -> int:
     for label, out in (("MCAP log", args.mcap), ("Rerun recording", args.rrd)):
         if out:
             print(f"  {label}: {out}")
+    if energy.flagged:  # a result, not an error: the run's exit status is unchanged
+        sys.stdout.flush()
+        print(f"isaac run: warning: {energy.warning()}", file=sys.stderr)
     interrupted = (stopped is not None and stopped[0] != "error") or signal_in_close is not None
     _finish_compiling(sim, say=not args.quiet, interrupted=interrupted)
     if stopped is None and signal_in_close is not None:
@@ -577,3 +583,19 @@ def _energy(sim, record) -> float:
 
     totals = diagnostics.summary(sim.model, record, sim.scene.world.gravity)
     return totals.kinetic_energy + totals.potential_energy
+
+
+def _energy_check(sim, first, start_energy: float):
+    """The run's energy check (`isaac.engine.energy_check`) from its first record."""
+    from isaac.engine.energy_check import EnergyCheck
+
+    model = sim.model
+    motors = bool(model.joints.has_motor.any())
+    return EnergyCheck.of(model, first, sim.scene.world.gravity, start_energy, motors=motors)
+
+
+def _batch_energies(sim, before, batch):
+    """(total, entered) energies (J) of each step of a batch (`diagnostics.batch_energies`)."""
+    from isaac.engine import diagnostics
+
+    return diagnostics.batch_energies(sim.model, before, batch, sim.scene.world.gravity)

@@ -14,6 +14,7 @@ the worst case and counting the others, so a scene of 100,000 bodies gives a few
 - a body whose centre of mass lies inside a concrete body when it first exists (a body does
   not move before it exists, a concrete body never moves, so this is known from the scene):
   the push-out can only move it the shortest way out, which may be through the concrete;
+- joint geometry the step cannot hold (below): a run of it gains energy from nowhere;
 - bodies that overlap at step 0 by more than the slop (`world.slop`, at most SLOP_SHARE of the
   thinner body's thickness, as isaac.engine.push_out caps it): the first steps push them apart
   instead of starting from the scene as written; and a body entering later that overlaps a
@@ -32,6 +33,23 @@ of tests/extremes/test_mass_ratio.py), with friction on and off alike. Measured:
 
 The table keeps a margin below the edge for fast (50) and accurate (1000, the ratio the
 stability suite asserts). At 1e9:1 the light box ends inside the concrete ground.
+
+Joint geometry. Two shapes of jointed scene make the sequential solver's step put energy in
+(the energy check of isaac.engine.energy_check then flags the run), whatever the iterations;
+what holds them is a shorter sub-step h = world.dt / world.substeps. With k = sqrt(I / m) a
+body's radius of gyration (m) and |g| gravity's magnitude:
+- an anchor far outside its body: R = 1 + r^2 / k^2 (the body's mass over the effective mass
+  m / (1 + m r^2 / I) its anchor offers, r the anchor's distance from the centre of mass);
+  ANCHOR_LIMIT bounds h sqrt(|g| / k) R^(5/4);
+- a long chain of light links: N movable bodies joined together (one connected set of joints),
+  links of length w = sqrt(12) k (a thin rod's); CHAIN_LIMIT bounds h sqrt(2 |g| N / w), the
+  angle a link turns in a sub-step when the chain's end falls its length.
+Measured under balanced (the energy check's flag within 600-2400 steps at dt 1/120 s unless
+said): a 0.1 m box on a distance joint anchored r from its centre holds r = 0.35 m (28 for the
+anchor figure) and fails at r = 0.4 m (39); anchored 1 m off it fails with 4 and 8 sub-steps (48)
+and holds with 16 (24); a 1 m box anchored 5 m off holds (22). Chains of 0.1 x 0.02 m boxes hold
+16 links for 2400 steps (0.47) and 18 for 600 (0.50), and fail at 20 (0.52); 0.25 x 0.05 m
+links hold 20 (0.33) and fail at 40 (0.47), which 1/240 s holds (0.23). The limits sit between.
 """
 
 from __future__ import annotations
@@ -55,6 +73,9 @@ SLOP_SHARE = 0.05
 MAX_PAIRS = 2_000_000
 MAX_SAT_PAIRS = 200_000
 _FILTER = ("category", "mask", "group")
+# the joint-geometry figures past which the step is measured to gain energy (module docstring)
+ANCHOR_LIMIT = 30.0
+CHAIN_LIMIT = 0.45
 
 
 def scene_warnings(scene: Scene, steps: int | None = None) -> list[str]:
@@ -66,6 +87,7 @@ def scene_warnings(scene: Scene, steps: int | None = None) -> list[str]:
     first, last = existence(scene.bodies, scene.world.dt, steps)
     lines += _never_exist(scene, steps, first, last)
     lines += _placement(scene, first, last)
+    lines += _joint_geometry(scene)
     return lines
 
 
@@ -282,3 +304,80 @@ def _placement(scene: Scene, first: np.ndarray, last: np.ndarray) -> list[str]:
                 f"{_more(count - 1, 'bodies entering into concrete bodies')}"
             )
     return lines
+
+
+def _joint_geometry(scene: Scene) -> list[str]:
+    """The worst anchor and the worst chain past ANCHOR_LIMIT and CHAIN_LIMIT (module
+    docstring), each with the sub-steps that would bring it under its limit."""
+    joints = scene.joints
+    world = scene.world
+    g = float(np.hypot(*world.gravity))
+    if not joints or g == 0.0:
+        return []
+    props = mass_properties(scene.bodies)
+    with np.errstate(all="ignore"):
+        k = np.sqrt(props.inertia / props.mass)  # radius of gyration (m)
+    concrete = np.fromiter((b.concrete for b in scene.bodies), bool, count=len(scene.bodies))
+    h = world.dt / world.substeps
+    lines = []
+    # anchors: the worst movable body's
+    worst = None
+    for i, j in enumerate(joints):
+        for body, local in ((j.a, j.local_a), (j.b, j.local_b)):
+            if concrete[body]:
+                continue
+            ratio = 1.0 + float(np.hypot(*local)) ** 2 / float(k[body]) ** 2
+            figure = h * np.sqrt(g / k[body]) * ratio**1.25
+            if worst is None or figure > worst[0]:
+                worst = (float(figure), i, body, ratio)
+    if worst is not None and worst[0] > ANCHOR_LIMIT:
+        figure, i, body, ratio = worst
+        lines.append(
+            f"{scene.source}: joints[{i}] ({shown(joints[i].name)}): the anchor on "
+            f"{shown(scene.bodies[body].name)} is {float(np.hypot(*_local(joints[i], body))):.3g} "
+            f"m from its centre, where it offers 1/{ratio:.3g} of the body's mass: beyond what "
+            f"a sub-step of {h:.3g} s holds ({figure:.3g} > {ANCHOR_LIMIT:g}), the run may gain "
+            f"energy from nowhere; {_substeps_hint(world, figure / ANCHOR_LIMIT)} "
+            "(docs/scene-format.md, Warnings)"
+        )
+    # chains: connected sets of joined movable bodies
+    parent = list(range(len(scene.bodies)))
+
+    def root(x: int) -> int:
+        while parent[x] != x:
+            parent[x] = parent[parent[x]]
+            x = parent[x]
+        return x
+
+    for j in joints:
+        if not (concrete[j.a] or concrete[j.b]):
+            parent[root(j.a)] = root(j.b)
+    sets: dict[int, list[int]] = {}
+    for body in sorted({b for j in joints for b in (j.a, j.b) if not concrete[b]}):
+        sets.setdefault(root(body), []).append(body)
+    worst = None
+    for members in sets.values():
+        w = float(np.sqrt(12.0) * np.mean(k[members]))
+        figure = h * np.sqrt(2.0 * g * len(members) / w)
+        if worst is None or figure > worst[0]:
+            worst = (float(figure), members, w)
+    if worst is not None and worst[0] > CHAIN_LIMIT:
+        figure, members, w = worst
+        lines.append(
+            f"{scene.source}: joints: a chain of {len(members)} links about {w:.3g} m long "
+            f"(from {shown(scene.bodies[members[0]].name)}) is beyond what a sub-step of "
+            f"{h:.3g} s holds ({figure:.3g} > {CHAIN_LIMIT:g}), the run may gain energy from "
+            f"nowhere; {_substeps_hint(world, figure / CHAIN_LIMIT)} "
+            "(docs/scene-format.md, Warnings)"
+        )
+    return lines
+
+
+def _local(joint, body: int):
+    return joint.local_a if body == joint.a else joint.local_b
+
+
+def _substeps_hint(world, factor: float) -> str:
+    """The fix: sub-steps (or a dt) `factor` times finer, rounded up to a power of two."""
+    need = world.substeps * 2 ** int(np.ceil(np.log2(factor)))
+    return f"set world.substeps: {need} (now {world.substeps}), or a dt as many times smaller"

@@ -3,8 +3,9 @@ defines each column).
 
 `Measure` sees the initial record and then every `StepBatch` the run yields, and keeps a few
 numbers: nothing here re-simulates or re-derives physics beyond the engine's diagnostics
-(energies) and the tunneling test that `isaac tradeoff` uses (the segment each body's centre
-travels in a step, clipped against the concrete polygons).
+(energies, and the energy check of isaac.engine.energy_check) and the tunneling test that
+`isaac tradeoff` uses (the segment each body's centre travels in a step, clipped against the
+concrete polygons).
 """
 
 from __future__ import annotations
@@ -55,6 +56,7 @@ def columns(metrics, final_bodies) -> list:
             out.append(pa.field("max_depth", pa.float64()))
         elif name == "energy_drift":
             out += [pa.field("energy_drift", pa.float64()), pa.field("energy_change", pa.float64())]
+            out += [pa.field("energy_rose", pa.bool_()), pa.field("energy_rose_step", pa.int64())]
         elif name == "contacts":
             out += [pa.field("contacts", pa.int64()), pa.field("contact_steps", pa.int64())]
         elif name == "tunneled":
@@ -103,6 +105,15 @@ class Measure:
         self._state0 = sim.state
         self._boxes = None
         self.tunneled = np.zeros(self.model.n_bodies, dtype=bool)
+        self.energy = None
+        if "energy_drift" in self.metrics:
+            from isaac.engine import diagnostics
+            from isaac.engine.energy_check import EnergyCheck
+
+            e0 = diagnostics.summary(self.model, first, self.gravity)
+            motors = bool(self.model.joints.has_motor.any())
+            start = e0.kinetic_energy + e0.potential_energy
+            self.energy = EnergyCheck.of(self.model, first, self.gravity, start, motors=motors)
 
     def add(self, batch) -> None:
         """Take the records of `batch` (isaac.StepBatch), in order."""
@@ -115,6 +126,10 @@ class Measure:
             self.max_depth = max(self.max_depth, float(batch.all_contacts().depth.max()))
         if self.planes or self.discs:
             self._tunneling(batch)
+        if self.energy is not None:
+            from isaac.engine import diagnostics
+
+            self.energy.add(*diagnostics.batch_energies(self.model, self.last, batch, self.gravity))
         self.last = batch.record(batch.steps - 1)
 
     def _bounds(self) -> list:
@@ -231,6 +246,9 @@ class Measure:
                 end = e1.kinetic_energy + e1.potential_energy
                 out["energy_change"] = end - start
                 out["energy_drift"] = (end - start) / abs(start) if start != 0.0 else None
+                # isaac.engine.energy_check; a scene with a motor is not checked (False)
+                out["energy_rose"] = self.energy.flagged
+                out["energy_rose_step"] = self.energy.step
             elif name == "contacts":
                 out["contacts"] = self.contacts
                 out["contact_steps"] = self.contact_steps
