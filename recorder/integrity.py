@@ -14,7 +14,10 @@ What a log claims:
   ``last_step``: recorder/mcap_writer.py), the summary's statistics (messages per channel,
   chunk count), its chunk indexes (where each chunk starts, its sizes, compression and times),
   its metadata index and the footer's summary CRC. After the walk all of it is compared with
-  what was read (`check_claims`); the first disagreement is a `Damage` too;
+  what was read (`check_claims`); the first disagreement is a `Damage` too. So is what a seeking
+  reader trusts instead of the data: the MessageIndex records after each chunk (checked as the
+  chunk is read: `McapScan.index_error`), the statistics' other counts and times, the attachment
+  and metadata indexes, the summary's schemas and channels, and its summary offsets;
 - a log never closed (a ``.partial`` left by a crash): only what its readable chunks hold; with
   no summary it cannot prove that nothing is missing after its last step (``complete`` False).
 

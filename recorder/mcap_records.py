@@ -31,6 +31,7 @@ import os
 import stat
 import struct
 import zlib
+from array import array
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from io import BytesIO
@@ -291,8 +292,8 @@ class McapScan:
     message_index_lengths: list = field(default_factory=list)
     index_error: RecordError | None = None
     position: int = 0  # just past the last record read
-    # the chunk whose message indexes may follow: (offset, data, message starts, their
-    # channels and log times once computed)
+    # the chunk whose message indexes may follow: (offset, data, message starts, the
+    # (offset, channel id, body) of each of its message indexes read so far)
     _open: list | None = None
 
     def records(
@@ -375,8 +376,8 @@ class McapScan:
                 self.chunks.append(_released(chunk))
                 self.message_indexes.append({})
                 self.message_index_lengths.append(0)
-                starts: list = []
-                self._open = [chunk.offset, data, starts, None]
+                starts = array("q")  # appended per message, read by numpy without a copy
+                self._open = [chunk.offset, data, starts, []]
                 yield from self._chunk_messages(chunk.offset, data, starts)
             elif opcode == OP_MESSAGE:
                 if in_summary:
@@ -450,7 +451,8 @@ class McapScan:
             return
 
     def _check_message_index(self, offset: int, body: memoryview) -> None:
-        """Check one MessageIndex record against the chunk it follows (``index_error``)."""
+        """Note one MessageIndex record after the open chunk (its framing checked here, its
+        entries with the chunk's others in `_chunk_indexed`)."""
         if self._open is None:
             self.index_error = RecordError(offset, "a message index that follows no chunk")
             return
@@ -465,64 +467,77 @@ class McapScan:
             return
         k = len(self.chunks) - 1
         seen = self.message_indexes[k]
-        chunk_at = self._open[0]
-        topic = self._topic(cid)
         if cid in seen:
             self.index_error = RecordError(
-                offset, f"a second message index of {topic} after the chunk at byte {chunk_at}"
+                offset,
+                f"a second message index of {self._topic(cid)} after the chunk at byte "
+                f"{self._open[0]}",
             )
             return
         seen[cid] = offset
         self.message_index_lengths[k] += 9 + len(body)
-        # (log_time, offset) pairs, compared in offset order with the chunk's own messages
-        listed = np.frombuffer(body, dtype="<u8", offset=_INDEX_HEAD.size).reshape(-1, 2)
-        starts, channels, times = self._chunk_table()
-        mine = channels == cid
-        held = np.column_stack((times[mine], starts[mine].astype(np.uint64)))
-        if len(listed) != len(held):
-            self.index_error = RecordError(
-                offset,
-                f"the message index of {topic} after the chunk at byte {chunk_at} lists "
-                f"{len(listed)} messages; the chunk holds {len(held)}",
-            )
-            return
-        listed = listed[np.argsort(listed[:, 1], kind="stable")]
-        wrong = np.flatnonzero((listed != held).any(axis=1))
-        if len(wrong):
-            t, at = (int(v) for v in listed[wrong[0]])
-            self.index_error = RecordError(
-                offset,
-                f"the message index of {topic} after the chunk at byte {chunk_at} lists a "
-                f"message at offset {at} with log time {t}: the chunk has no {topic} message "
-                f"there with that log time",
-            )
-
-    def _chunk_table(self):
-        """(message starts, their channel ids, their log times) of the open chunk, as arrays
-        gathered from its bytes (once a chunk: no Python work per message)."""
-        if self._open[3] is None:
-            data, starts = self._open[1], np.asarray(self._open[2], dtype=np.int64)
-            buf = np.frombuffer(data, dtype=np.uint8)
-            channels = buf[starts + 9].astype(np.uint16) | (buf[starts + 10].astype(np.uint16) << 8)
-            times = buf[(starts + 15)[:, None] + _BYTE].copy().view("<u8").ravel()
-            self._open[3] = (starts, channels, times)
-        return self._open[3]
+        self._open[3].append((offset, cid, body))
 
     def _chunk_indexed(self) -> None:
-        """The chunk's message indexes have all come: unless it has none at all (an MCAP file
-        may leave them out), every channel it holds must have one."""
-        seen = self.message_indexes[-1]
-        chunk_at = self._open[0]
-        if seen and self.index_error is None:
-            _starts, channels, _times = self._chunk_table()
-            for cid in np.unique(channels).tolist():
-                if cid not in seen:
-                    self.index_error = RecordError(
-                        chunk_at,
-                        f"the chunk at byte {chunk_at} has no message index of {self._topic(cid)}",
-                    )
-                    break
+        """The open chunk's message indexes have all come: unless it has none (an MCAP file may
+        leave them out), together they must list each of its messages once, by its channel,
+        its log time and its offset in the chunk. One pass of array operations a chunk (the
+        entries of every index against the messages' starts, channels and log times gathered
+        from the chunk's bytes), no Python work per message."""
+        chunk_at, data, starts, indexes = self._open
         self._open = None
+        if not indexes or self.index_error is not None:
+            return
+        starts = np.frombuffer(starts, dtype=np.int64)
+        buf = np.frombuffer(data, dtype=np.uint8)
+        channels = buf[starts + 9].astype(np.int64) | (buf[starts + 10].astype(np.int64) << 8)
+        times = buf[(starts + 15)[:, None] + _BYTE].copy().view("<u8").ravel()
+        entries = [
+            np.frombuffer(body, dtype="<u8", offset=_INDEX_HEAD.size) for *_x, body in indexes
+        ]
+        listed = np.concatenate(entries).reshape(-1, 2)
+        owner = np.repeat(np.arange(len(indexes)), [len(e) // 2 for e in entries])
+        order = np.argsort(listed[:, 1], kind="stable")
+        cids = np.array([cid for _o, cid, _b in indexes], dtype=np.int64)
+        if len(listed) == len(starts) and (
+            np.array_equal(listed[order, 1], starts)
+            and np.array_equal(listed[order, 0], times)
+            and np.array_equal(cids[owner[order]], channels)
+        ):
+            return
+        self.index_error = self._index_error(chunk_at, indexes, starts, channels, times)
+
+    def _index_error(self, chunk_at, indexes, starts, channels, times) -> RecordError:
+        """The first index of a chunk that does not list its channel's messages (slow path,
+        once a log)."""
+        for offset, cid, body in indexes:
+            listed = np.frombuffer(body, dtype="<u8", offset=_INDEX_HEAD.size).reshape(-1, 2)
+            mine = channels == cid
+            held = np.column_stack((times[mine], starts[mine].astype(np.uint64)))
+            topic = self._topic(cid)
+            if len(listed) != len(held):
+                return RecordError(
+                    offset,
+                    f"the message index of {topic} after the chunk at byte {chunk_at} lists "
+                    f"{len(listed)} messages; the chunk holds {len(held)}",
+                )
+            listed = listed[np.argsort(listed[:, 1], kind="stable")]
+            wrong = np.flatnonzero((listed != held).any(axis=1))
+            if len(wrong):
+                t, at = (int(v) for v in listed[wrong[0]])
+                return RecordError(
+                    offset,
+                    f"the message index of {topic} after the chunk at byte {chunk_at} lists a "
+                    f"message at offset {at} with log time {t}: the chunk has no {topic} "
+                    f"message there with that log time",
+                )
+        missing = sorted(set(channels.tolist()) - {cid for _o, cid, _b in indexes})
+        return RecordError(
+            chunk_at,
+            f"the chunk at byte {chunk_at} has no message index of {self._topic(missing[0])}"
+            if missing
+            else f"the message indexes after the chunk at byte {chunk_at} do not list its messages",
+        )
 
     def _topic(self, cid: int) -> str:
         channel = self.channels.get(cid)
@@ -562,7 +577,7 @@ class McapScan:
         view = buf if isinstance(buf, memoryview) else memoryview(buf)
         return Msg(offset, cid, seq, log_time, publish_time, view[pos + 22 : end])
 
-    def _chunk_messages(self, offset: int, data, starts: list) -> Iterator[Msg]:
+    def _chunk_messages(self, offset: int, data, starts: array) -> Iterator[Msg]:
         """Walk one decompressed chunk's records with struct offsets (no copies); the offset of
         each message record within the chunk is appended to ``starts``."""
         pos, end = 0, len(data)

@@ -4,7 +4,8 @@ Used by ``isaac inspect`` / ``isaac recover`` / ``isaac view`` and by the replay
 
     log = LogReader("run.mcap")          # raises LogError if not a readable ISAAC log
     log.metadata                         # dict[str, str]: the `isaac` metadata (versions, settings)
-    log.settings                         # dict: every world setting (JSON-decoded), log.dt
+    log.settings                         # dict: every world setting of the embedded scene, log.dt
+    log.header_damage                    # Damage | None: metadata disagreeing with the scene
     log.scene_text                       # str: the expanded scene YAML (attachment scene.yaml)
     log.scene()                          # isaac.scene.Scene loaded from it
     log.world                            # WorldTable at step 0 (same names as Simulation.model)
@@ -578,9 +579,13 @@ class LogReader:
         if self._checked is None:
             try:
                 scene = self.scene()
-            except (LogError, SceneError) as exc:
+            except LogError as exc:  # the scene's bytes are not the ones recorded
                 what = str(exc).removeprefix(f"{self.path}: ")
                 self._checked = (Damage(what, None, self.metadata_offset), [])
+            except SceneError:
+                # as recorded, but this version does not take it (the replay refuses it, exit
+                # 2): nothing to check the metadata against
+                self._checked = (None, [])
             else:
                 what, notes = check_metadata(
                     self.metadata, scene, self.scene_text, len(scene.bodies)
@@ -593,7 +598,7 @@ class LogReader:
     def header_damage(self) -> Damage | None:
         """The first value of the ``isaac`` metadata that disagrees with the embedded scene
         (`recorder.integrity.check_metadata`), or an embedded scene that does not match its
-        sha256 or does not load; None when the header is sound."""
+        sha256; None when the header is sound or the scene, as recorded, does not load."""
         return self._check_header()[0]
 
     def restated_metadata(self) -> dict[str, str]:
@@ -625,17 +630,17 @@ class LogReader:
         """Every world setting of the run (JSON values, as in the ``settings`` metadata): the
         embedded scene's, the one source the replay simulates from; the recorded ``settings``
         (``recorded_settings``) only when the scene cannot be loaded (``header_damage`` says
-        why)."""
-        if self.header_damage is not None and self._scene is None:
+        when it was altered)."""
+        self._check_header()  # loads the scene once, if it loads
+        if self._scene is None:
             return self.recorded_settings
-        return json.loads(json.dumps(asdict(self.scene().world), sort_keys=True))
+        return json.loads(json.dumps(asdict(self._scene.world), sort_keys=True))
 
     @property
     def dt(self) -> float:
         """The time step, s: the embedded scene's (``recorded_dt`` when it cannot be loaded)."""
-        if self.header_damage is not None and self._scene is None:
-            return self.recorded_dt
-        return float(self.scene().world.dt)
+        self._check_header()
+        return self.recorded_dt if self._scene is None else float(self._scene.world.dt)
 
     @property
     def end(self) -> dict | None:
