@@ -14,18 +14,38 @@ What a log claims:
   ``last_step``: recorder/mcap_writer.py), the summary's statistics (messages per channel,
   chunk count), its chunk indexes (where each chunk starts, its sizes, compression and times),
   its metadata index and the footer's summary CRC. After the walk all of it is compared with
-  what was read (`check_claims`); the first disagreement is a `Damage` too;
+  what was read (`check_claims`); the first disagreement is a `Damage` too. So is what a seeking
+  reader trusts instead of the data: the MessageIndex records after each chunk (checked as the
+  chunk is read: `McapScan.index_error`), the statistics' other counts and times, the attachment
+  and metadata indexes, the summary's schemas and channels, and its summary offsets;
 - a log never closed (a ``.partial`` left by a crash): only what its readable chunks hold; with
   no summary it cannot prove that nothing is missing after its last step (``complete`` False).
+
+The embedded scene (``scene.yaml``, checked against its recorded sha256) is what a replay
+re-simulates from: every other copy of what it says, in the ``isaac`` metadata (``settings``,
+each ``world.<key>``, ``dt``, ``gravity``, ``bodies``, ``scene_name``), must be what the recorder
+writes from it (`check_metadata`).
 """
 
 from __future__ import annotations
 
+import json
 from collections.abc import Iterator
 from dataclasses import dataclass
 
-from recorder.mcap_records import McapScan, RecordError, open_log
-from recorder.mcap_writer import META_END
+from recorder.mcap_records import (
+    OP_FOOTER,
+    OP_SUMMARY_OFFSET,
+    McapScan,
+    RecordError,
+    open_log,
+)
+from recorder.mcap_writer import META_END, META_START, build_metadata
+
+# the `isaac` metadata keys that restate the embedded scene (recorder.mcap_writer.build_metadata);
+# the rest (versions, machine) say where the log was made and have nothing to be checked against
+SCENE_KEYS = ("scene_name", "scene_attachment", "bodies", "dt", "gravity", "log_time")
+SETTING_PREFIX = "world."
 
 STEP_TOPICS = ("/bodies", "/contacts", "/stats")
 # /joints (a scene with joints only) is read with the step; written before /stats, it is there
@@ -284,9 +304,33 @@ def check_claims(scan: McapScan, reader: StepReader) -> Damage | None:
             _first_unheld(written, last, reader.first, reader.last),
             end_offset,
         )
+    if scan.index_error is not None:
+        return Damage(scan.index_error.what, None, scan.index_error.offset)
     stats = scan.statistics
     if stats is None:
         return Damage("the log's summary has no statistics record", None, scan.footer_offset)
+    times = [(c.message_start_time, c.message_end_time) for c in scan.chunks]
+    counted = (
+        (
+            ("schemas", stats.schema_count, len(scan.schemas)),
+            ("channels", stats.channel_count, len(scan.channels)),
+            ("attachments", stats.attachment_count, len(scan.attachments)),
+            ("metadata records", stats.metadata_count, len(scan.metadata)),
+            ("as its first message time", stats.message_start_time, min(t[0] for t in times)),
+            ("as its last message time", stats.message_end_time, max(t[1] for t in times)),
+        )
+        if times
+        else ()
+    )
+    for name, said, read in counted:
+        if said != read:
+            return Damage(
+                f"the summary's statistics count {said} {name}, the file holds {read}"
+                if not name.startswith("as ")
+                else f"the summary's statistics give {said} {name}, the file {read}",
+                None,
+                scan.footer_offset,
+            )
     if stats.chunk_count != len(scan.chunks):
         return Damage(
             f"the summary counts {stats.chunk_count} chunks, the file holds {len(scan.chunks)}",
@@ -318,7 +362,7 @@ def check_claims(scan: McapScan, reader: StepReader) -> Damage | None:
             scan.footer_offset,
         )
     index = {ci.chunk_start_offset: ci for ci in scan.chunk_indexes}
-    for chunk in scan.chunks:
+    for k, chunk in enumerate(scan.chunks):
         ci = index.get(chunk.offset)
         if ci is None:
             return Damage("a chunk the summary's index does not list", None, chunk.offset)
@@ -329,6 +373,8 @@ def check_claims(scan: McapScan, reader: StepReader) -> Damage | None:
             ("uncompressed size", ci.uncompressed_size, chunk.uncompressed_size),
             ("first message time", ci.message_start_time, chunk.message_start_time),
             ("last message time", ci.message_end_time, chunk.message_end_time),
+            ("message index offsets", ci.message_index_offsets, scan.message_indexes[k]),
+            ("message index length", ci.message_index_length, scan.message_index_lengths[k]),
         )
         for name, indexed, actual in fields:
             if indexed != actual:
@@ -343,6 +389,9 @@ def check_claims(scan: McapScan, reader: StepReader) -> Damage | None:
             None,
             scan.footer_offset,
         )
+    damage = _check_summary_indexes(scan)
+    if damage is not None:
+        return damage
     footer = scan.footer
     if footer.summary_start != (scan.first_summary_offset or 0):
         return Damage("the footer does not point at the summary's start", None, scan.footer_offset)
@@ -350,4 +399,152 @@ def check_claims(scan: McapScan, reader: StepReader) -> Damage | None:
         return Damage(
             "the summary's CRC does not match its bytes (corrupt)", None, footer.summary_start
         )
+    return None
+
+
+def _settings_keys(metadata: dict) -> dict:
+    """setting -> its ``world.<setting>`` value (JSON text)."""
+    n = len(SETTING_PREFIX)
+    return {k[n:]: v for k, v in metadata.items() if k.startswith(SETTING_PREFIX)}
+
+
+def check_metadata(
+    metadata: dict, scene, scene_text: str, n_bodies: int
+) -> tuple[str | None, list[str]]:
+    """Whether the ``isaac`` metadata says what the embedded scene says: (the first value that
+    disagrees, in one line, or None; notes).
+
+    ``scene`` is the `isaac.scene.Scene` loaded from ``scene_text`` (the attachment, whose sha256
+    the caller has checked) and ``n_bodies`` its body count. Expected is what
+    `recorder.mcap_writer.build_metadata` writes from it: `SCENE_KEYS` and every setting,
+    in ``settings`` (one JSON object) and in ``world.<key>`` (one JSON value each), byte for
+    byte. The two copies of the settings must list the same settings and agree with each other
+    and with the scene; a setting that only this version knows, or only the log's (a log of
+    another version), is a note, not damage.
+    """
+    expected = build_metadata(scene, scene_text, n_bodies)
+    what = f"the '{META_START}' metadata"
+    for key in SCENE_KEYS:
+        if metadata.get(key) != expected[key]:
+            return (
+                f"{what} says {key} {metadata.get(key)!r}, the embedded scene "
+                f"{expected[key]!r} (edited or corrupt)",
+                [],
+            )
+    try:
+        logged = json.loads(metadata.get("settings", ""))
+    except (ValueError, RecursionError):
+        logged = None
+    if not isinstance(logged, dict):
+        return f"{what}'s settings are not a JSON object", []
+    flat, ours = _settings_keys(metadata), _settings_keys(expected)
+    if set(flat) != set(logged):
+        only = sorted(set(flat) ^ set(logged))
+        return (
+            f"{what} lists other settings in settings than as world.<key> "
+            f"({', '.join(only[:5])}: edited or corrupt)",
+            [],
+        )
+    for key in sorted(logged):
+        # each copy against the scene; a setting this version does not know, copy against copy
+        text = json.dumps(logged[key])
+        truth, source = (ours[key], "the embedded scene") if key in ours else (text, "settings")
+        if flat[key] != truth:
+            return f"{what} says world.{key} {flat[key]}, {source} {truth} (edited or corrupt)", []
+        if text != truth:
+            return f"{what}'s settings say {key} {text}, {source} {truth} (edited or corrupt)", []
+    changed = sorted(set(ours) ^ set(logged))
+    if not changed:
+        if metadata["settings"] != expected["settings"]:
+            return f"{what}'s settings are not the JSON the recorder writes (edited)", []
+        return None, []
+    # recorded by a version with other settings: those both know were checked above
+    return None, [
+        "this version reads the embedded scene's world settings differently from the log's "
+        "recorded settings: "
+        + ", ".join(
+            f"{k} (log {logged.get(k)!r}, now {json.loads(ours[k]) if k in ours else None!r})"
+            for k in changed
+        )
+    ]
+
+
+def _check_summary_indexes(scan: McapScan) -> Damage | None:
+    """What a seeking reader (the official `mcap` reader, Foxglove) takes from the summary
+    instead of the data: the metadata and attachment indexes, the repeated schemas and
+    channels, and the summary offsets (each group where it says, holding that group's records)."""
+    where = scan.footer_offset
+    listed = {(mi.offset, mi.name): mi.length for mi in scan.metadata_indexes}
+    for offset, record in scan.metadata:
+        length = listed.pop((offset, record.name), None)
+        if length is None:
+            return Damage(
+                f"the summary's metadata index does not point at the {record.name} record",
+                None,
+                offset,
+            )
+    if listed:
+        (offset, name), _length = next(iter(listed.items()))
+        return Damage(
+            f"the summary's metadata index lists a {name} record at byte {offset} the file "
+            "does not hold there",
+            None,
+            where,
+        )
+    held = {offset: a for offset, a in scan.attachments}
+    if len(scan.attachment_indexes) != len(held):
+        return Damage(
+            f"the summary indexes {len(scan.attachment_indexes)} attachments, the file holds "
+            f"{len(held)}",
+            None,
+            where,
+        )
+    for ai in scan.attachment_indexes:
+        a = held.get(ai.offset)
+        if a is None or (ai.name, ai.media_type, ai.data_size, ai.log_time, ai.create_time) != (
+            a.name,
+            a.media_type,
+            len(a.data),
+            a.log_time,
+            a.create_time,
+        ):
+            return Damage(
+                f"the summary's attachment index of {ai.name[:40]!r} does not match the "
+                f"attachment at byte {ai.offset}",
+                None,
+                where,
+            )
+    for name, summary, data in (
+        ("schema", scan.summary_schemas, scan.schemas),
+        ("channel", scan.summary_channels, scan.channels),
+    ):
+        for rid, record in summary.items():
+            if data.get(rid) != record:
+                return Damage(
+                    f"the summary's {name} {rid} is not the one the data section holds",
+                    None,
+                    where,
+                )
+    groups: dict = {}
+    for offset, opcode, length in scan.summary_records:
+        if opcode in (OP_SUMMARY_OFFSET, OP_FOOTER):
+            continue
+        start, end = groups.get(opcode, (offset, offset))
+        if end != offset:
+            return Damage(
+                f"the summary's records of opcode 0x{opcode:02x} are not one group", None, offset
+            )
+        groups[opcode] = (start, offset + length)
+    said = {so.group_opcode: so for so in scan.summary_offsets}
+    for opcode, so in said.items():
+        start, end = groups.get(opcode, (so.group_start, so.group_start))  # (an empty group)
+        if (so.group_start, so.group_length) != (start, end - start):
+            return Damage(
+                f"the summary offset of opcode 0x{opcode:02x} does not point at that group",
+                None,
+                where,
+            )
+    first = next((o for o, op, _n in scan.summary_records if op == OP_SUMMARY_OFFSET), 0)
+    if scan.summary_offsets and scan.footer.summary_offset_start != first:
+        return Damage("the footer does not point at the summary offsets", None, where)
     return None

@@ -16,9 +16,13 @@ something writes to it). Here, instead:
   what is wrong); the caller decides what that means for the log.
 
 `McapScan` walks a whole file once: every message in file order (inside chunks or not), and on
-the way what the file says about itself (channels, metadata, the summary's statistics and chunk
-indexes) and what was actually read (messages per channel, the chunks and where they start), so
-a caller can compare the two (`recorder.integrity`). Record layout: https://mcap.dev/spec.
+the way what the file says about itself (channels, metadata, the summary's statistics, chunk,
+attachment and metadata indexes, summary offsets) and what was actually read (messages per
+channel, the chunks and where they start, the records of the summary), so a caller can compare
+the two (`recorder.integrity`). The MessageIndex records after each chunk, which this reader
+does not need but seeking readers use to find a message, are checked against the chunk as they
+come (`McapScan.index_error`: the first that does not list exactly the chunk's messages of its
+channel, each at its offset with its log time). Record layout: https://mcap.dev/spec.
 """
 
 from __future__ import annotations
@@ -27,14 +31,17 @@ import os
 import stat
 import struct
 import zlib
+from array import array
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from io import BytesIO
 from typing import NamedTuple
 
+import numpy as np
 from mcap.data_stream import ReadDataStream
 from mcap.records import (
     Attachment,
+    AttachmentIndex,
     Channel,
     ChunkIndex,
     Footer,
@@ -43,6 +50,7 @@ from mcap.records import (
     MetadataIndex,
     Schema,
     Statistics,
+    SummaryOffset,
 )
 
 from isaac.errors import LogError
@@ -85,7 +93,12 @@ _PARSERS = {
     OP_STATISTICS: Statistics,
     OP_CHUNK_INDEX: ChunkIndex,
     OP_METADATA_INDEX: MetadataIndex,
+    OP_ATTACHMENT_INDEX: AttachmentIndex,
+    OP_SUMMARY_OFFSET: SummaryOffset,
 }
+# a MessageIndex record: channel id, byte length of the (log_time, offset) pairs that follow
+_INDEX_HEAD = struct.Struct("<HI")
+_BYTE = np.arange(8)
 
 
 class RecordError(Exception):
@@ -269,7 +282,19 @@ class McapScan:
     footer: Footer | None = None
     footer_offset: int | None = None
     first_summary_offset: int | None = None
+    summary_schemas: dict = field(default_factory=dict)
+    attachment_indexes: list = field(default_factory=list)
+    summary_offsets: list = field(default_factory=list)  # SummaryOffset records
+    summary_records: list = field(default_factory=list)  # (offset, opcode, length) after DataEnd
+    # the MessageIndex records after each chunk (parallel to ``chunks``): channel id -> offset
+    # of its record, and their bytes in all; the first one that disagrees with its chunk
+    message_indexes: list = field(default_factory=list)
+    message_index_lengths: list = field(default_factory=list)
+    index_error: RecordError | None = None
     position: int = 0  # just past the last record read
+    # the chunk whose message indexes may follow: (offset, data, message starts, the
+    # (offset, channel id, body) of each of its message indexes read so far)
+    _open: list | None = None
 
     def records(
         self, *, start: int = 0, until: tuple = ()
@@ -339,21 +364,31 @@ class McapScan:
         """Every message in file order, inside chunks or not (raises RecordError)."""
         in_summary = False
         for offset, opcode, body in self.records(start=start):
+            if opcode != OP_MESSAGE_INDEX and self._open is not None:
+                self._chunk_indexed()
+            if in_summary:
+                self.summary_records.append((offset, opcode, 9 + len(body)))
             if opcode == OP_CHUNK:
                 if in_summary:
                     raise RecordError(offset, "a chunk after the end of the data section")
                 chunk = _parse_chunk(offset, body)
                 data = chunk_data(chunk)
                 self.chunks.append(_released(chunk))
-                yield from self._chunk_messages(chunk.offset, data)
+                self.message_indexes.append({})
+                self.message_index_lengths.append(0)
+                starts = array("q")  # appended per message, read by numpy without a copy
+                self._open = [chunk.offset, data, starts, []]
+                yield from self._chunk_messages(chunk.offset, data, starts)
             elif opcode == OP_MESSAGE:
                 if in_summary:
                     raise RecordError(offset, "a message after the end of the data section")
                 yield self._message(offset, body, 0, len(body))
-            elif opcode in (OP_MESSAGE_INDEX, OP_ATTACHMENT_INDEX, OP_SUMMARY_OFFSET):
-                if in_summary and self.first_summary_offset is None:
-                    self.first_summary_offset = offset
-                continue  # indexes for seeking readers: this one reads in order
+            elif opcode == OP_MESSAGE_INDEX:
+                if in_summary:
+                    if self.first_summary_offset is None:
+                        self.first_summary_offset = offset
+                elif self.index_error is None:
+                    self._check_message_index(offset, body)
             elif opcode == OP_DATA_END:
                 in_summary = True
                 self.data_end = offset
@@ -415,12 +450,108 @@ class McapScan:
         except (RecordError, StopIteration):
             return
 
+    def _check_message_index(self, offset: int, body: memoryview) -> None:
+        """Note one MessageIndex record after the open chunk (its framing checked here, its
+        entries with the chunk's others in `_chunk_indexed`)."""
+        if self._open is None:
+            self.index_error = RecordError(offset, "a message index that follows no chunk")
+            return
+        if len(body) < _INDEX_HEAD.size:
+            self.index_error = RecordError(offset, "a message index record too short")
+            return
+        cid, size = _INDEX_HEAD.unpack_from(body, 0)
+        if size != len(body) - _INDEX_HEAD.size or size % 16:
+            self.index_error = RecordError(
+                offset, f"a message index whose entries ({size} bytes) do not fit its record"
+            )
+            return
+        k = len(self.chunks) - 1
+        seen = self.message_indexes[k]
+        if cid in seen:
+            self.index_error = RecordError(
+                offset,
+                f"a second message index of {self._topic(cid)} after the chunk at byte "
+                f"{self._open[0]}",
+            )
+            return
+        seen[cid] = offset
+        self.message_index_lengths[k] += 9 + len(body)
+        self._open[3].append((offset, cid, body))
+
+    def _chunk_indexed(self) -> None:
+        """The open chunk's message indexes have all come: unless it has none (an MCAP file may
+        leave them out), together they must list each of its messages once, by its channel,
+        its log time and its offset in the chunk. One pass of array operations a chunk (the
+        entries of every index against the messages' starts, channels and log times gathered
+        from the chunk's bytes), no Python work per message."""
+        chunk_at, data, starts, indexes = self._open
+        self._open = None
+        if not indexes or self.index_error is not None:
+            return
+        starts = np.frombuffer(starts, dtype=np.int64)
+        buf = np.frombuffer(data, dtype=np.uint8)
+        channels = buf[starts + 9].astype(np.int64) | (buf[starts + 10].astype(np.int64) << 8)
+        times = buf[(starts + 15)[:, None] + _BYTE].copy().view("<u8").ravel()
+        entries = [
+            np.frombuffer(body, dtype="<u8", offset=_INDEX_HEAD.size) for *_x, body in indexes
+        ]
+        listed = np.concatenate(entries).reshape(-1, 2)
+        owner = np.repeat(np.arange(len(indexes)), [len(e) // 2 for e in entries])
+        order = np.argsort(listed[:, 1], kind="stable")
+        cids = np.array([cid for _o, cid, _b in indexes], dtype=np.int64)
+        if len(listed) == len(starts) and (
+            np.array_equal(listed[order, 1], starts)
+            and np.array_equal(listed[order, 0], times)
+            and np.array_equal(cids[owner[order]], channels)
+        ):
+            return
+        self.index_error = self._index_error(chunk_at, indexes, starts, channels, times)
+
+    def _index_error(self, chunk_at, indexes, starts, channels, times) -> RecordError:
+        """The first index of a chunk that does not list its channel's messages (slow path,
+        once a log)."""
+        for offset, cid, body in indexes:
+            listed = np.frombuffer(body, dtype="<u8", offset=_INDEX_HEAD.size).reshape(-1, 2)
+            mine = channels == cid
+            held = np.column_stack((times[mine], starts[mine].astype(np.uint64)))
+            topic = self._topic(cid)
+            if len(listed) != len(held):
+                return RecordError(
+                    offset,
+                    f"the message index of {topic} after the chunk at byte {chunk_at} lists "
+                    f"{len(listed)} messages; the chunk holds {len(held)}",
+                )
+            listed = listed[np.argsort(listed[:, 1], kind="stable")]
+            wrong = np.flatnonzero((listed != held).any(axis=1))
+            if len(wrong):
+                t, at = (int(v) for v in listed[wrong[0]])
+                return RecordError(
+                    offset,
+                    f"the message index of {topic} after the chunk at byte {chunk_at} lists a "
+                    f"message at offset {at} with log time {t}: the chunk has no {topic} "
+                    f"message there with that log time",
+                )
+        missing = sorted(set(channels.tolist()) - {cid for _o, cid, _b in indexes})
+        return RecordError(
+            chunk_at,
+            f"the chunk at byte {chunk_at} has no message index of {self._topic(missing[0])}"
+            if missing
+            else f"the message indexes after the chunk at byte {chunk_at} do not list its messages",
+        )
+
+    def _topic(self, cid: int) -> str:
+        channel = self.channels.get(cid)
+        return channel.topic if channel is not None else f"channel {cid}"
+
     def _note(self, offset: int, record, in_summary: bool) -> None:
         if isinstance(record, Channel):
             (self.summary_channels if in_summary else self.channels)[record.id] = record
         elif isinstance(record, Schema):
-            if not in_summary:
-                self.schemas[record.id] = record
+            (self.summary_schemas if in_summary else self.schemas)[record.id] = record
+        elif isinstance(record, AttachmentIndex):
+            self.attachment_indexes.append(record)
+        elif isinstance(record, SummaryOffset):
+            self.summary_offsets.append(record)
         elif isinstance(record, Metadata):
             self.metadata.append((offset, record))
         elif isinstance(record, Attachment):
@@ -446,8 +577,9 @@ class McapScan:
         view = buf if isinstance(buf, memoryview) else memoryview(buf)
         return Msg(offset, cid, seq, log_time, publish_time, view[pos + 22 : end])
 
-    def _chunk_messages(self, offset: int, data) -> Iterator[Msg]:
-        """Walk one decompressed chunk's records with struct offsets (no copies)."""
+    def _chunk_messages(self, offset: int, data, starts: array) -> Iterator[Msg]:
+        """Walk one decompressed chunk's records with struct offsets (no copies); the offset of
+        each message record within the chunk is appended to ``starts``."""
         pos, end = 0, len(data)
         view = memoryview(data)
         while pos < end:
@@ -458,6 +590,7 @@ class McapScan:
             if length > end - pos:
                 raise RecordError(offset, "a record that runs past the end of its chunk")
             if opcode == OP_MESSAGE:
+                starts.append(pos - 9)
                 yield self._message(offset, view, pos, pos + length)
             elif opcode in (OP_CHANNEL, OP_SCHEMA):
                 self._note(offset, self.parse(offset, opcode, view[pos : pos + length]), False)

@@ -4,7 +4,8 @@ Used by ``isaac inspect`` / ``isaac recover`` / ``isaac view`` and by the replay
 
     log = LogReader("run.mcap")          # raises LogError if not a readable ISAAC log
     log.metadata                         # dict[str, str]: the `isaac` metadata (versions, settings)
-    log.settings                         # dict: every world setting (JSON-decoded), log.dt
+    log.settings                         # dict: every world setting of the embedded scene, log.dt
+    log.header_damage                    # Damage | None: metadata disagreeing with the scene
     log.scene_text                       # str: the expanded scene YAML (attachment scene.yaml)
     log.scene()                          # isaac.scene.Scene loaded from it
     log.world                            # WorldTable at step 0 (same names as Simulation.model)
@@ -30,21 +31,22 @@ short, a contact naming a body that does not exist) raises LogError ("damaged lo
 from __future__ import annotations
 
 import contextlib
+import hashlib
 import json
 import math
 import os
 from collections.abc import Iterator
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
 
 import numpy as np
 from mcap.records import Header, Metadata
 from mcap.writer import Writer
 
 from isaac.engine.records import JOINT_FIELDS, Contacts, JointRows, StepRecord
-from isaac.errors import LogError
+from isaac.errors import LogError, SceneError
 from isaac.scene.limits import MAX_VERTICES
 from recorder import schema as S
-from recorder.integrity import Damage, StepReader
+from recorder.integrity import SCENE_KEYS, SETTING_PREFIX, Damage, StepReader, check_metadata
 from recorder.mcap_records import (
     MAGIC,
     OP_ATTACHMENT,
@@ -64,6 +66,7 @@ from recorder.mcap_writer import (
     META_END,
     META_START,
     SCENE_ATTACHMENT,
+    build_metadata,
     end_metadata,
 )
 
@@ -386,6 +389,9 @@ class LogReader:
         self.claimed_steps: int | None = None
         self._header_records: list = []  # metadata and attachments before the first chunk
         self._reader: StepReader | None = None  # of the last `steps`
+        self.metadata_offset: int | None = None  # of the `isaac` metadata record
+        self._scene = None
+        self._checked: tuple[Damage | None, list[str]] | None = None
         header_damage: RecordError | None = None
         with f:
             scan = McapScan(f, self.size)
@@ -402,6 +408,7 @@ class LogReader:
                                 continue
                             if record.name == META_START and not self.metadata:
                                 self.metadata = dict(record.metadata)
+                                self.metadata_offset = offset
                         else:
                             self.attachments.setdefault(record.name, bytes(record.data))
                         self._header_records.append(record)
@@ -417,7 +424,7 @@ class LogReader:
             raise LogError(f"{self.path}: not an ISAAC log (no '{META_START}' metadata){damaged}")
         if SCENE_ATTACHMENT not in self.attachments:
             raise LogError(f"{self.path}: the log has no {SCENE_ATTACHMENT} attachment{damaged}")
-        self.settings, self.dt = _settings(self.path, self.metadata)
+        self.recorded_settings, self.recorded_dt = _settings(self.path, self.metadata)
         self.closed_cleanly = self._has_footer()
         self._world0: WorldTable | None = None
 
@@ -511,7 +518,8 @@ class LogReader:
             except DECODE_ERRORS as exc:
                 raise LogError(f"{self.path}: damaged log: step {step}: {exc}") from None
             yield LoggedStep(record, stats, world)
-        self.damage = reader.damage
+        # the steps' damage first (it names a step), else the header's
+        self.damage = reader.damage if reader.damage is not None else self.header_damage
         self.tail = reader.tail
         self.claimed_steps = reader.claimed_steps
         if reader.end is not None:
@@ -552,10 +560,90 @@ class LogReader:
             raise LogError(f"{self.path}: the embedded scene is not UTF-8 text ({exc})") from None
 
     def scene(self):
-        """The run's `isaac.scene.Scene`, loaded from the embedded ``scene.yaml``."""
-        from isaac.scene import load_scene_text
+        """The run's `isaac.scene.Scene`, loaded from the embedded ``scene.yaml`` once its bytes
+        match the ``scene_sha256`` recorded beside them: LogError (one line) if they do not,
+        SceneError if the scene fails validation."""
+        if self._scene is None:
+            from isaac.scene import load_scene_text
 
-        return load_scene_text(self.scene_text, f"{self.path}:{SCENE_ATTACHMENT}")
+            text = self.scene_text
+            recorded = self.metadata.get("scene_sha256")
+            if recorded is None:
+                raise LogError(f"{self.path}: the log's metadata has no scene_sha256")
+            if recorded != hashlib.sha256(text.encode("utf-8")).hexdigest():
+                raise LogError(
+                    f"{self.path}: the embedded scene does not match its recorded sha256 "
+                    f"(the log was altered or is corrupt)"
+                )
+            self._scene = load_scene_text(text, f"{self.path}:{SCENE_ATTACHMENT}")
+        return self._scene
+
+    def _check_header(self) -> tuple[Damage | None, list[str]]:
+        if self._checked is None:
+            try:
+                scene = self.scene()
+            except LogError as exc:  # the scene's bytes are not the ones recorded
+                what = str(exc).removeprefix(f"{self.path}: ")
+                self._checked = (Damage(what, None, self.metadata_offset), [])
+            except SceneError:
+                # as recorded, but this version does not take it (the replay refuses it, exit
+                # 2): nothing to check the metadata against
+                self._checked = (None, [])
+            else:
+                what, notes = check_metadata(
+                    self.metadata, scene, self.scene_text, len(scene.bodies)
+                )
+                damage = None if what is None else Damage(what, None, self.metadata_offset)
+                self._checked = (damage, notes)
+        return self._checked
+
+    @property
+    def header_damage(self) -> Damage | None:
+        """The first value of the ``isaac`` metadata that disagrees with the embedded scene
+        (`recorder.integrity.check_metadata`), or an embedded scene that does not match its
+        sha256; None when the header is sound or the scene, as recorded, does not load."""
+        return self._check_header()[0]
+
+    def restated_metadata(self) -> dict[str, str]:
+        """The ``isaac`` metadata with every value that restates the embedded scene rewritten
+        from it, as the recorder writes it (`recorder.mcap_writer.build_metadata`); the
+        versions and the machine as recorded."""
+        scene = self.scene()
+        expected = build_metadata(scene, self.scene_text, len(scene.bodies))
+        kept = {
+            k: v
+            for k, v in self.metadata.items()
+            if k not in SCENE_KEYS and k != "settings" and not k.startswith(SETTING_PREFIX)
+        }
+        restated = {
+            k: v
+            for k, v in expected.items()
+            if k in SCENE_KEYS or k == "settings" or k.startswith(SETTING_PREFIX)
+        }
+        return {**kept, **restated}
+
+    @property
+    def header_notes(self) -> list[str]:
+        """Settings only this version or only the log's recorder knows (a log of another
+        version): what `check_metadata` could not compare."""
+        return self._check_header()[1]
+
+    @property
+    def settings(self) -> dict:
+        """Every world setting of the run (JSON values, as in the ``settings`` metadata): the
+        embedded scene's, the one source the replay simulates from; the recorded ``settings``
+        (``recorded_settings``) only when the scene cannot be loaded (``header_damage`` says
+        when it was altered)."""
+        self._check_header()  # loads the scene once, if it loads
+        if self._scene is None:
+            return self.recorded_settings
+        return json.loads(json.dumps(asdict(self._scene.world), sort_keys=True))
+
+    @property
+    def dt(self) -> float:
+        """The time step, s: the embedded scene's (``recorded_dt`` when it cannot be loaded)."""
+        self._check_header()
+        return self.recorded_dt if self._scene is None else float(self._scene.world.dt)
 
     @property
     def end(self) -> dict | None:
@@ -672,13 +760,18 @@ def _settings(path: str, metadata: dict) -> tuple[dict, float]:
 
 class Recovered(tuple):
     """What `recover` wrote: (steps kept, the last of them); ``lost`` says what it could not
-    salvage (None when it kept everything the source claimed)."""
+    salvage (None when it kept everything the source claimed); ``restated``, what it rewrote
+    from the embedded scene (the ``isaac`` metadata that disagreed with it), or None."""
 
     lost: str | None
+    restated: str | None
 
-    def __new__(cls, kept: int, last: int | None, lost: str | None) -> Recovered:
+    def __new__(
+        cls, kept: int, last: int | None, lost: str | None, restated: str | None = None
+    ) -> Recovered:
         self = super().__new__(cls, (kept, last))
         self.lost = lost
+        self.restated = restated
         return self
 
     @property
@@ -708,6 +801,10 @@ def recover(src: str, dst: str) -> Recovered:
         why = f" (damaged log: {damage})" if damage is not None else ""
         raise LogError(f"{src}: no complete step to recover{why}")
     lost = _lost(reader)
+    # the metadata that disagrees with the embedded scene (itself intact: it loads and matches
+    # its sha256) is written as the recorder writes it from that scene
+    header = log.header_damage
+    restated = None if header is None or log._scene is None else header.what
     # the same chunk compression as the source's first chunk
     chunks = reader.scan.chunks
     compression = (chunks[0].compression if chunks else "") or "none"
@@ -733,7 +830,10 @@ def recover(src: str, dst: str) -> Recovered:
             # metadata and attachments first, as the writer puts them
             for record in log._header_records:
                 if isinstance(record, Metadata):
-                    writer.add_metadata(record.name, dict(record.metadata))
+                    values = dict(record.metadata)
+                    if record.name == META_START and restated is not None:
+                        values = log.restated_metadata()
+                    writer.add_metadata(record.name, values)
                 else:
                     writer.add_attachment(
                         record.create_time,
@@ -774,7 +874,7 @@ def recover(src: str, dst: str) -> Recovered:
     except OSError as exc:
         os.unlink(tmp)
         raise LogError(f"cannot write {dst}: {exc.strerror or exc}") from None
-    return Recovered(count, last, lost)
+    return Recovered(count, last, lost, restated)
 
 
 def _lost(reader: StepReader) -> str | None:

@@ -22,19 +22,17 @@ LogError / SceneError (exit status 2).
 
 from __future__ import annotations
 
-import hashlib
-import json
 import sys
 import time
 from collections.abc import Callable, Iterator
-from dataclasses import asdict, fields
+from dataclasses import fields
 
 import numpy as np
 
 from isaac.engine import PHYSICS_VERSION
 from isaac.engine.records import StepRecord
 from isaac.errors import LogError, SimulationError
-from isaac.scene import Scene, load_scene_text
+from isaac.scene import Scene
 from recorder import schema as S
 from recorder.mcap_writer import (
     FORMAT_VERSION,
@@ -126,33 +124,16 @@ def versions_note(
 
 
 def load_embedded_scene(log: RawLog) -> tuple[Scene, list[str]]:
-    """The log's embedded scene, validated and checked against its recorded sha256.
+    """The log's embedded scene, validated and checked against its recorded sha256
+    (`recorder.reader.LogReader.scene`).
 
     Returns (scene, notes). Raises LogError if the scene text was altered (its sha256 does not
-    match the metadata) and SceneError if it fails validation.
+    match the metadata) and SceneError if it fails validation. A metadata value that disagrees
+    with the scene is damage (``log.damage`` after the steps), not an error: the steps are
+    still compared.
     """
-    text = log.scene_text
-    recorded = log.metadata.get("scene_sha256")
-    actual = hashlib.sha256(text.encode("utf-8")).hexdigest()
-    if recorded is None:
-        raise LogError(f"{log.path}: the log's metadata has no scene_sha256")
-    if recorded != actual:
-        raise LogError(
-            f"{log.path}: the embedded scene does not match its recorded sha256 "
-            f"(the log was altered or is corrupt)"
-        )
-    scene = load_scene_text(text, source=f"{log.path}:scene.yaml")
-    notes = []
-    ours = json.loads(json.dumps(asdict(scene.world), sort_keys=True))
-    theirs = log.header.settings
-    changed = sorted(k for k in set(ours) | set(theirs) if ours.get(k) != theirs.get(k))
-    if changed:
-        notes.append(
-            "this version reads the embedded scene's world settings differently from "
-            "the log's recorded settings: "
-            + ", ".join(f"{k} (log {theirs.get(k)!r}, now {ours.get(k)!r})" for k in changed)
-        )
-    return scene, notes
+    scene = log.header.scene()
+    return scene, list(log.header.header_notes)
 
 
 def _completeness(
@@ -174,6 +155,11 @@ def _completeness(
     if damage is not None:
         complete = False
         why = f"{name}the log is damaged from {damage.at()} on"
+        if damage is log.header.header_damage:
+            why = (
+                f"{name}its metadata does not say what its embedded scene says (the scene, "
+                f"checked against its sha256, is what was replayed)"
+            )
         text = name + str(damage)
         report.damage = text if not report.damage else f"{report.damage}; {text}"
         if damage.step is not None and (
@@ -420,11 +406,6 @@ def replay_log(
     note = versions_note(log.metadata, here, suggest=tolerance is None, physics=False)
     if note:
         report.notes.append(note)
-    if log.metadata.get("bodies") not in (None, str(len(names))):
-        report.notes.append(
-            f"the log's metadata says {log.metadata['bodies']} bodies; the "
-            f"embedded scene has {len(names)}"
-        )
 
     # the replayed steps, a batch per compiled call, packed as the recorder packs them
     replayed = ReplayedSteps(

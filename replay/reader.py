@@ -99,13 +99,15 @@ class RawLog:
                 yield RawStep(step, {t: bytes(v) for t, v in messages.items()})
         finally:
             inner.close()
-            self.damage = reader.damage
+            # the steps' damage first (it names a step), else the header's (the metadata
+            # disagreeing with the embedded scene: recorder.integrity.check_metadata)
+            self.damage = reader.damage if reader.damage is not None else self.header.header_damage
             self.end = reader.end
             self.incomplete_tail = reader.tail
             self.claimed_steps = reader.claimed_steps
             self.claimed_last = reader.claimed_last
             self.read_through = reader.ended
-            self.complete = reader.complete
+            self.complete = reader.complete and self.damage is None
             self.closed_cleanly = reader.closed
 
 

@@ -435,6 +435,8 @@ def cmd_recover(args: argparse.Namespace) -> int:
     )
     if lost:
         print(f"could not salvage: {lost}")
+    if done.restated:
+        print(f"rewrote the metadata from the embedded scene: {done.restated}")
     return 0
 
 
