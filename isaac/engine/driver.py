@@ -973,10 +973,15 @@ class Stepper:
         index `start` when `record`; `state.step`, the carried rows and the start of the last
         step taken follow it. Returns (status, steps taken, body, field, needed)."""
         check = self.check_state
-        if type(state.step) is not int and check is not None:
+        try:
+            step = state.step
+        except AttributeError:  # (not a State: the check says so)
+            step = None
+        if type(step) is not int and check is not None:
             check()
+            step = state.step
         status, done, carried, body, field, need, last_carried = self.kernel(
-            call.kit(self._current_kit(), state, check), start, self.carried, state.step, k, record
+            call.kit(self._current_kit(), state, check), start, self.carried, step, k, record
         )
         self.carried = carried
         state.step += done

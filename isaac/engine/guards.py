@@ -59,10 +59,12 @@ def count(value, what: str, *, minimum: int = 0) -> int:
     return int(value)
 
 
-def check_state(state, n: int) -> None:
+def check_state(state, names: tuple[str, ...]) -> None:
     """Check a simulation's `State` before compiled code advances it in place: a `State` whose
     step is an int >= 0 and whose arrays are (n, 2) or (n,) float64 (exists: bool), C-contiguous,
-    writeable and finite. A numpy integer step is made a Python int."""
+    writeable and finite, for the n bodies named `names`. A numpy integer step is made a Python
+    int."""
+    n = len(names)
     if not isinstance(state, State):
         raise TypeError(f"sim.state must be an isaac.engine.world.State, got {_kind(state)}")
     state.step = count(state.step, "sim.state.step")
@@ -80,7 +82,7 @@ def check_state(state, n: int) -> None:
                 f"assign a copy (np.array(x, dtype=np.{dtype.name}))"
             )
         if dtype.kind == "f":
-            _finite(a, where, None)
+            _finite(a, where, names)
 
 
 def checked_record(record, model, dt: float, substeps: int):

@@ -153,7 +153,7 @@ class Simulation:
             and s.exists is c[5]
             and type(s.step) is int
         ):
-            check_state(s, self.model.n_bodies)
+            check_state(s, self.model.names)
             self._state_checked()
 
     def _no_impulses(self) -> np.ndarray:
