@@ -427,3 +427,6 @@ def test_the_cli_refuses_a_negative_or_fractional_step_option_in_one_line(tmp_pa
         assert got.returncode == 2, (argv, got.stderr)
         last = got.stderr.strip().splitlines()[-1]
         assert words in last and "Traceback" not in got.stderr, (argv, got.stderr)
+    # a run of no steps is still one (its batches of 0 and max(0 - 1, 0) steps)
+    none = subprocess.run([*isaac, "run", str(tmp_path / "s.yaml"), "--steps", "0"], cwd=ROOT)
+    assert none.returncode == 0
