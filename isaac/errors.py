@@ -48,3 +48,11 @@ class SimulationError(IsaacError):
 
 class LogError(IsaacError):
     """A log file (MCAP) is missing, unreadable, not an ISAAC log, or corrupt."""
+
+
+class StateError(IsaacError, ValueError):
+    """A record or a state array handed to a `Simulation` does not fit its scene (another body
+    or joint count, another dt, a wrong shape or dtype, a value that is not finite).
+
+    Raised before anything reaches compiled code; a ValueError too, for Python callers.
+    """

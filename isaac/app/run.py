@@ -430,7 +430,9 @@ def cmd_run(args: argparse.Namespace) -> int:
         size = batch_size(sim.n_bodies)
         # (the first step alone: it also loads or compiles the kernels, and the rate is
         # measured after it)
-        batches = chain(sim.batches(min(1, steps), size=1), sim.batches(steps - 1, size=size))
+        batches = chain(
+            sim.batches(min(1, steps), size=1), sim.batches(max(steps - 1, 0), size=size)
+        )
         for batch in batches:
             if recorder:
                 recorder.write_batch(batch)

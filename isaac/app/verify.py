@@ -96,6 +96,9 @@ def register(subparsers) -> None:
 
 
 def _check(args: argparse.Namespace) -> None:
+    for option, value in (("--from-step", args.from_step), ("--to-step", args.to_step)):
+        if value is not None and value < 0:  # (a negative step read as the log's first or none)
+            raise LogError(f"{option} must be >= 0, got {value}")
     if args.tolerance is not None and not args.tolerance >= 0:
         raise LogError(f"--tolerance must be >= 0, got {args.tolerance}")
     if args.max_reported < 1:

@@ -741,6 +741,9 @@ class Stepper:
         self._slots: list[StepSlot] = []  # the most recently used last
         self._held = None  # the last slot `_held_slot` made
         self._rows_per_step = 4 * self.n  # first guess at a batch's contact rows per step
+        # called before compiled code gets a state whose arrays or step index it has not had
+        # (`BatchCall.kit`; `Simulation` sets its check of the state's arrays)
+        self.check_state = None
 
     def _fit(self) -> None:
         """(Re)build the scratch and carry tuples for the workspace's current capacity, and
@@ -969,8 +972,16 @@ class Stepper:
         """One driver call of up to k steps from `state`, writing its batch (`call`'s) from
         index `start` when `record`; `state.step`, the carried rows and the start of the last
         step taken follow it. Returns (status, steps taken, body, field, needed)."""
+        check = self.check_state
+        try:
+            step = state.step
+        except AttributeError:  # (not a State: the check says so)
+            step = None
+        if type(step) is not int and check is not None:
+            check()
+            step = state.step
         status, done, carried, body, field, need, last_carried = self.kernel(
-            call.kit(self._current_kit(), state), start, self.carried, state.step, k, record
+            call.kit(self._current_kit(), state, check), start, self.carried, step, k, record
         )
         self.carried = carried
         state.step += done

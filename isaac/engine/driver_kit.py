@@ -166,7 +166,10 @@ def make_call_kit(arrays: tuple, driver, pose: tuple):
 class BatchCall:
     """A batch's arrays and its call kit (`make_call_kit`), made again when the driver's kit or
     the pose it holds is not the one given (a buffer grew, or the state's arrays were replaced:
-    `Simulation.resume`, or a user's assignment), else the same object, call after call."""
+    `Simulation.resume`, or a user's assignment), else the same object, call after call.
+    The kit is made again only after `check()` (given: `Simulation`'s check of the state's
+    arrays, `isaac.engine.guards.check_state`) passes, so that arrays a caller assigned reach
+    compiled code checked, at no cost to a call whose pose is the one before."""
 
     __slots__ = ("arrays", "_kit", "_driver", "_pose")
 
@@ -176,9 +179,9 @@ class BatchCall:
         self._driver = None
         self._pose = None
 
-    def kit(self, driver, state):
+    def kit(self, driver, state, check=None):
         """The call kit of this batch with `driver` (a `DriverKit`) and `state`'s arrays (an
-        `isaac.engine.world.State`)."""
+        `isaac.engine.world.State`); check: called first when those are not the kit's."""
         p = self._pose
         if (
             self._driver is not driver
@@ -188,6 +191,8 @@ class BatchCall:
             or p[3] is not state.angular_velocity
             or p[4] is not state.exists
         ):
+            if check is not None:
+                check()
             s = state
             self._pose = (s.position, s.angle, s.velocity, s.angular_velocity, s.exists)
             self._driver = driver

@@ -247,7 +247,22 @@ class StepBatch:
             steps,
         )  # fmt: skip
 
+    def _place(self, s) -> int:
+        """s as a place of this batch: an int 0 .. steps - 1 (numpy integers too); TypeError
+        or ValueError else (a negative place read the last step's arrays under another
+        step's index)."""
+        if type(s) is int and 0 <= s < self.steps:  # the common case, first
+            return s
+        from isaac.engine.guards import count  # (guards imports this module)
+
+        s = count(s, "a batch's place")
+        if s >= self.steps:
+            raise ValueError(f"place {s} is past the batch's last (it holds {self.steps} steps)")
+        return s
+
     def contacts_of(self, s: int) -> Contacts:
+        """The contact rows of step s (a place 0 .. steps - 1), views."""
+        s = self._place(s)
         lo, hi = int(self.offsets[s]), int(self.offsets[s + 1])
         return Contacts(*(a[lo:hi] for a in self._rows))
 
@@ -260,6 +275,7 @@ class StepBatch:
 
     def joints_of(self, s: int) -> JointRows | None:
         """The joints at the end of step s (views), or None for a scene without joints."""
+        s = self._place(s)
         if self._joints is None:
             return None
         return JointRows(*(a[s] for a in self._joints))
@@ -271,8 +287,9 @@ class StepBatch:
 
     def record(self, s: int) -> StepRecord:
         """Step s as a `StepRecord` whose arrays are views of this batch, made when first read
-        (a record of a 2-body step cost 5 us made eagerly, more than the step)."""
-        return _BatchRecord.of(self, s)
+        (a record of a 2-body step cost 5 us made eagerly, more than the step); s: a place
+        0 .. steps - 1."""
+        return _BatchRecord.of(self, self._place(s))
 
     @staticmethod
     def of_records(records: list[StepRecord], dt: float) -> StepBatch:

@@ -9,6 +9,7 @@ import numpy as np
 
 from isaac.engine import compile_ahead as _ahead
 from isaac.engine.driver import STAGES, Stepper
+from isaac.engine.guards import check_state, checked_record, count
 from isaac.engine.integrate import DIVERGED_ANGLE, DIVERGED_POSITION, DIVERGED_SPEED, diverged_body
 from isaac.engine.joints import JOINT_IMPULSES
 from isaac.engine.records import (
@@ -18,6 +19,7 @@ from isaac.engine.records import (
     JointRows,
     StepBatch,
     StepRecord,
+    _BatchRecord,
 )
 from isaac.engine.step import (
     ContactCache,
@@ -84,6 +86,9 @@ class Simulation:
             else Stepper(self.model, self.settings, scene.world.dt, self._work, timed=bool(profile))
         )
         self.state: State = initial_state(scene, self.model)
+        self._state_checked()
+        if self._stepper is not None:  # (the driver's calls check a state they have not had)
+            self._stepper.check_state = self._check_state
         self._contacts = Contacts.empty()
         self._rows_from = None  # a batch's record whose rows are the current ones (_rows_of)
         self._step_driver = False  # step() takes the driver (_step_takes_driver)
@@ -108,15 +113,48 @@ class Simulation:
         The record's state and its contacts (feature ids and impulses, which the next step reads
         for axis hysteresis and warm starting) are all the next step needs, so stepping on from
         here gives the same bits as a run that went through it.
+
+        The record is checked against the scene first (`isaac.engine.guards.checked_record`):
+        TypeError for anything but a `StepRecord`, `isaac.errors.StateError` (a ValueError)
+        naming what differs for a record of another scene (its body or joint count, dt,
+        existence) or with arrays of another shape or dtype, or not finite. The simulation
+        keeps private copies: the record may be changed afterwards.
         """
-        self._restore(record)
+        w = self.scene.world
+        state, contacts, joints = checked_record(record, self.model, w.dt, w.substeps)
+        self.state = state
+        self._state_checked()
         self._rows_from = None
-        self._contacts = record.contacts
-        self._joints = record.joints
-        impulses = self._no_impulses() if record.joints is None else record.joints.impulses
-        self._cache = ContactCache.of(record.contacts, self.model.n_bodies, impulses)
+        self._contacts = contacts
+        self._joints = joints
+        impulses = self._no_impulses() if joints is None else joints.impulses
+        self._cache = ContactCache.of(contacts, self.model.n_bodies, impulses)
         self._carry_in_stepper = False
         self._last = self.record()
+
+    def _state_checked(self) -> None:
+        """Note the state's arrays as checked: made or checked by the engine."""
+        s = self.state
+        self._checked = (s, s.position, s.angle, s.velocity, s.angular_velocity, s.exists)
+
+    def _check_state(self) -> None:
+        """Before compiled code reads the state: check it (`isaac.engine.guards.check_state`)
+        when it or one of its arrays is not the one last checked (a caller replaced it
+        between steps, `sim.state.velocity = ...`), or its step is not an int; else (the
+        common case) nothing more than these identity checks. The staged path calls it a step,
+        the driver's calls only when their kit's pose is not the state's (`BatchCall.kit`)."""
+        s, c = self.state, self._checked
+        if not (
+            s is c[0]
+            and s.position is c[1]
+            and s.angle is c[2]
+            and s.velocity is c[3]
+            and s.angular_velocity is c[4]
+            and s.exists is c[5]
+            and type(s.step) is int
+        ):
+            check_state(s, self.model.names)
+            self._state_checked()
 
     def _no_impulses(self) -> np.ndarray:
         return np.zeros((self.model.joints.kind.shape[0], JOINT_IMPULSES))
@@ -191,6 +229,7 @@ class Simulation:
 
     def record(self) -> StepRecord:
         """An immutable copy of the current state and the contacts of the step that made it."""
+        self._check_state()
         s = self.state
         return StepRecord(
             step=s.step,
@@ -209,6 +248,7 @@ class Simulation:
 
         Raises SimulationError (naming the step and body) if the state becomes NaN, infinite or
         absurdly large; the state before the failing step is what `record()` returned last.
+        StateError if the state's arrays were replaced by ones that do not fit (`resume`).
         """
         if self._step_driver or self._step_takes_driver():
             return self._driven_step()
@@ -245,6 +285,7 @@ class Simulation:
         return last
 
     def _staged_step(self) -> StepRecord:
+        self._check_state()
         if self._last is None:  # after advance(): what a failing step goes back to
             self._last = self.record()
         contacts, cache = step(
@@ -279,7 +320,9 @@ class Simulation:
         """Advance `steps` steps now, without making a record of each (the fastest path: one
         compiled call). Eager, unlike `run`: the steps are taken before it returns.
         `record()` afterwards gives the last state and its step's contacts. Raises
-        SimulationError like `step()`, with the state left before the failing step."""
+        SimulationError like `step()`, with the state left before the failing step.
+        steps: an int >= 0 (`isaac.engine.guards.count`: TypeError or ValueError else)."""
+        steps = count(steps, "steps")
         while steps > 0 and not self._driver_ready():
             self._staged_step()
             steps -= 1
@@ -337,10 +380,17 @@ class Simulation:
         """Advance `steps` steps (default: the scene's `world.steps`), `size` at a time, and
         yield each batch of their records (`StepBatch`: read-only arrays, one compiled call
         per batch). A diverging step ends the run with SimulationError after the batch of
-        the steps before it was yielded."""
-        left = self.scene.world.steps if steps is None else steps
-        if size < 1:
-            raise ValueError(f"batch size must be >= 1, got {size}")
+        the steps before it was yielded. steps: an int >= 0, size: an int >= 1, checked at
+        the call (`isaac.engine.guards.count`: TypeError or ValueError else); the steps are
+        taken as the generator is iterated."""
+        return self._batches(*self._counts(steps, size, "size"))
+
+    def _counts(self, steps, size, name: str) -> tuple[int, int]:
+        """(steps, batch size) of a `run` or `batches` call, checked."""
+        steps = self.scene.world.steps if steps is None else count(steps, "steps")
+        return steps, count(size, name, minimum=1)
+
+    def _batches(self, left: int, size: int) -> Iterator[StepBatch]:
         while left > 0:
             k = min(size, left)
             left -= k
@@ -389,10 +439,17 @@ class Simulation:
 
         The simulation runs ahead of what has been taken from the generator by up to
         `batch - 1` steps: stopping early leaves it past the last record taken. `step()` takes
-        one step at a time; `resume(record)` goes back to any record, bit for bit."""
-        for chunk in self.batches(steps, size=batch):
+        one step at a time; `resume(record)` goes back to any record, bit for bit.
+
+        steps: an int >= 0, batch: an int >= 1, checked at the call, before iteration
+        (`isaac.engine.guards.count`: TypeError or ValueError else)."""
+        return self._records(self._batches(*self._counts(steps, batch, "batch")))
+
+    @staticmethod
+    def _records(batches: Iterator[StepBatch]) -> Iterator[StepRecord]:
+        for chunk in batches:
             for s in range(chunk.steps):
-                yield chunk.record(s)
+                yield _BatchRecord.of(chunk, s)  # (s is a place of the batch: unchecked)
 
     def detect(self) -> Contacts:
         """The contacts at the current pose (broad and narrow phase only; nothing moves).
@@ -400,6 +457,7 @@ class Simulation:
         Push vectors, impulses and restitution are zero: they exist only once a step resolves
         the contacts.
         """
+        self._check_state()
         # the last step's contacts as they are, wherever they are: detect only reads them
         # (taking them out of the driver, and back at the next step, cost pile-100 15 us)
         if self._carry_in_stepper:
@@ -426,6 +484,7 @@ class Simulation:
             raise KeyError(f"no body named {name!r}") from None
 
     def _restore(self, record: StepRecord) -> None:
+        """Go back to a record this simulation made (trusted: not checked again)."""
         self.state = State(
             int(record.step),
             np.array(record.position, dtype=np.float64),
@@ -434,6 +493,7 @@ class Simulation:
             np.array(record.angular_velocity, dtype=np.float64),
             np.array(record.exists, dtype=bool),
         )
+        self._state_checked()
 
 
 @dataclass(frozen=True, repr=False)

@@ -20,7 +20,7 @@ import sys
 
 import numpy as np
 
-from isaac.engine.records import StepBatch, StepRecord
+from isaac.engine.records import StepBatch, StepRecord, _BatchRecord
 
 _ALIGN = 64  # bytes: each array starts on a cache line (numba types a misaligned array apart)
 
@@ -95,7 +95,7 @@ class StepSlot:
         self._handing(at, at + 1)
         self._lent = False
         self._batch.first = step - at
-        return self._batch.record(at)
+        return _BatchRecord.of(self._batch, at)  # (a place just written: not checked again)
 
     def _handing(self, at: int, end: int) -> None:
         """Places at .. end - 1 go out: the next steps may go after them, never in them."""
