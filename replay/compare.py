@@ -78,6 +78,14 @@ class PhysicsVersionDiffers(LogError):
     exit_status = 1
 
 
+def check_tolerance(tolerance: float | None) -> None:
+    """A tolerance is None (bit for bit) or a finite number >= 0, else LogError (exit 2): with
+    an infinite one, ``X * (1 + |a|)`` is NaN where a value is 0 (``inf * 0``), and equal values
+    were reported as diverged; a NaN one compared nothing as equal."""
+    if tolerance is not None and not (np.isfinite(tolerance) and tolerance >= 0):
+        raise LogError(f"--tolerance must be a finite number >= 0, got {tolerance!r}")
+
+
 def physics_version(metadata: dict) -> str:
     """The physics version a log's metadata records ("1" for logs from before it was recorded)."""
     return metadata.get("physics_version") or "1"
@@ -376,6 +384,7 @@ def replay_log(
     """
     from isaac.engine.simulation import Simulation  # loads the compiled kernels
 
+    check_tolerance(tolerance)
     if from_step is not None and from_step < 0:
         raise LogError(f"--from-step must be >= 0, got {from_step}")
     if to_step is not None and from_step is not None and to_step < from_step:
@@ -602,6 +611,7 @@ def diff_logs(
     verdict ``identical``; when one is damaged or was never closed the comparison stops at its
     end and the verdict is ``damaged`` or ``incomplete`` (``partial`` with ``partial=True``).
     """
+    check_tolerance(tolerance)
     log_a, log_b = RawLog(path_a), RawLog(path_b)
     scene_a, _ = load_embedded_scene(log_a)
     scene_b, _ = load_embedded_scene(log_b)

@@ -41,7 +41,10 @@ def test_a_command_imports_its_own_module_alone():
         [sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=300
     )
     assert proc.returncode == 0, proc.stderr
-    assert proc.stdout.strip().splitlines()[-1] == "['isaac.app.cli', 'isaac.app.run']"
+    assert (
+        proc.stdout.strip().splitlines()[-1]
+        == "['isaac.app.cli', 'isaac.app.options', 'isaac.app.run']"
+    )
 
 
 def _python(code: str) -> subprocess.CompletedProcess:

@@ -1,6 +1,7 @@
 """``isaac view``: without a display it serves the web viewer on 127.0.0.1 and prints one URL;
-SIGTERM stops the viewer it started and leaves no temporary file; a .mcap's Rerun copy is kept
-next to the log and reused while the log is unchanged."""
+SIGTERM stops the viewer it started and leaves no temporary file, and SIGKILL takes the viewer
+with it; a bad address or port is one line before the viewer starts; a .mcap's Rerun copy is
+kept next to the log and reused while the log is unchanged."""
 
 from __future__ import annotations
 
@@ -81,8 +82,8 @@ def test_view_without_a_display_serves_localhost_and_a_signal_leaves_nothing_beh
         for port in (http_port, grpc_port):
             # bound to the loopback address only (127.0.0.1 is 0100007F in /proc/net/tcp)
             assert listening_sockets(port) == ["0100007F"], (port, listening_sockets(port))
-        viewers = children(proc.pid)
-        assert len(viewers) == 1 and all(alive(p) for p in viewers)
+        viewers = children(proc.pid)  # the viewer and its watchdog
+        assert len(viewers) == 2 and all(alive(p) for p in viewers)
         assert any(tmp.iterdir())  # its temporary directory, while it runs
         proc.send_signal(signum)
         _, err = proc.communicate(timeout=60)
@@ -140,3 +141,134 @@ def test_view_binds_127_0_0_1_unless_told_and_takes_the_ports_given(tmp_path):
     assert command[command.index("--bind") + 1] == "0.0.0.0"
     assert command[command.index("--web-viewer-port") + 1] == "8123"
     assert command[command.index("--port") + 1] == "8124"
+
+
+URL = re.compile(
+    r"http://(?P<host>[^/]+):(?P<http>\d+)/\?url=rerun%2Bhttp%3A%2F%2F(?P<proxy>.+)%3A(?P<grpc>\d+)%2Fproxy"
+)
+
+
+def start_view(log, *args):
+    """`isaac view LOG --web ARGS` (a new user's command), its URL once printed, as a match of
+    URL."""
+    proc = subprocess.Popen(
+        [PYTHON, "-m", "isaac", "view", str(log), "--web", *args],
+        cwd=REPO,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    ready, _, _ = select.select([proc.stdout], [], [], 180)
+    if not ready:
+        proc.kill()
+        proc.wait()
+        pytest.fail("no URL printed within 180 s")
+    url = proc.stdout.readline().strip()
+    m = URL.fullmatch(url)
+    if m is None:
+        proc.kill()
+        proc.wait()
+        pytest.fail(f"not the viewer's URL: {url!r}")
+    return proc, m
+
+
+def group_of(pid: int) -> list[int]:
+    """The live processes (not zombies) of process group ``pid``."""
+    found = []
+    for entry in os.listdir("/proc"):
+        if not entry.isdigit():
+            continue
+        try:
+            with open(f"/proc/{entry}/stat") as f:
+                fields = f.read().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        if int(fields[2]) == pid and fields[0] != "Z":  # fields: state, ppid, pgrp
+            found.append(int(entry))
+    return found
+
+
+def test_view_killed_with_sigkill_takes_its_viewer_with_it(tmp_path):
+    log = tmp_path / "run.rrd"
+    record_run(tmp_path / "run.mcap", n=4, contacts=1, steps=10, rrd=log)
+    proc, m = start_view(log)
+    groups = set()
+    try:
+        ports = int(m["http"]), int(m["grpc"])
+        groups = {os.getpgid(p) for p in children(proc.pid)}
+        assert all(listening_sockets(port) for port in ports)
+        proc.kill()  # SIGKILL: no clean-up of its own runs
+        proc.wait(timeout=10)
+        deadline = time.monotonic() + 5
+        while time.monotonic() < deadline and (
+            any(group_of(g) for g in groups) or any(listening_sockets(p) for p in ports)
+        ):
+            time.sleep(0.1)
+        assert not any(group_of(g) for g in groups), "the viewer outlived a killed isaac view"
+        assert not any(listening_sockets(p) for p in ports)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+        for g in groups:  # what a failed run of this test left
+            if group_of(g):
+                os.killpg(g, signal.SIGKILL)
+
+
+def test_view_on_the_ipv6_loopback_prints_its_address_in_brackets(tmp_path):
+    import socket
+
+    try:
+        with socket.socket(socket.AF_INET6) as s:
+            s.bind(("::1", 0))
+    except OSError:
+        pytest.skip("no IPv6 loopback here")
+    log = tmp_path / "run.rrd"
+    record_run(tmp_path / "run.mcap", n=4, contacts=1, steps=10, rrd=log)
+    proc, m = start_view(log, "--bind", "::1")
+    try:
+        assert m["host"] == "[::1]" and m["proxy"] == "%5B%3A%3A1%5D"  # [::1], URL-quoted
+        # ::1 is 00000000000000000000000001000000 in /proc/net/tcp6
+        assert listening_sockets(int(m["http"])) == ["00000000000000000000000001000000"]
+        proc.send_signal(signal.SIGTERM)
+        proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    assert proc.returncode == 128 + signal.SIGTERM
+
+
+@pytest.mark.parametrize(
+    "option, value",
+    [
+        ("--bind", "999.1.1.1"),
+        ("--bind", "example.invalid"),
+        ("--bind", "192.0.2.1"),  # TEST-NET-1: a valid address, of no interface here
+        ("--port", "99999"),
+        ("--port", "-1"),
+        ("--grpc-port", "abc"),
+        ("--grpc-port", "1e400"),
+    ],
+)
+def test_view_refuses_a_bad_address_or_port_in_one_line_before_starting(tmp_path, option, value):
+    log = tmp_path / "run.rrd"
+    record_run(tmp_path / "run.mcap", n=4, contacts=1, steps=5, rrd=log)
+    out = run_cli("view", str(log), "--web", option, value)
+    assert out.returncode == 2, out.stderr
+    (line,) = out.stderr.splitlines()
+    assert line.startswith("isaac view: error: ") and option in line and value in line, line
+    assert out.stdout == ""
+
+
+def test_view_takes_localhost_as_127_0_0_1_and_refuses_one_port_for_both(tmp_path):
+    log = tmp_path / "run.rrd"
+    record_run(tmp_path / "run.mcap", n=4, contacts=1, steps=5, rrd=log)
+    command = run_cli("view", str(log), "--bind", "localhost", "--dry-run").stdout.split()
+    assert command[command.index("--bind") + 1] == "127.0.0.1"
+    out = run_cli("view", str(log), "--web", "--port", "8125", "--grpc-port", "8125")
+    assert out.returncode == 2
+    assert (
+        out.stderr.strip()
+        == "isaac view: error: --grpc-port and --port must differ, got 8125 for both"
+    )

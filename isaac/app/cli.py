@@ -65,12 +65,20 @@ COMMANDS = {
 }
 
 
+class Parser(argparse.ArgumentParser):
+    """argparse's parser, whose usage errors (an unknown option, a missing argument, a value an
+    option's type refuses: isaac.app.options) are one line, ``isaac run: error: argument
+    --steps: ...; see `isaac run --help```, exit status 2, instead of the usage text and then
+    the error. Its sub-command parsers are of this class too (argparse makes them so)."""
+
+    def error(self, message: str):
+        self.exit(2, f"{self.prog}: error: {message}; see `{self.prog} --help`\n")
+
+
 def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     """The parser of every sub-command, or of ``command``'s module alone when it is one of
     COMMANDS (what `main` builds for a command line that starts with it)."""
-    parser = argparse.ArgumentParser(
-        prog="isaac", description="ISAAC: recorded, replayable 2D rigid-body physics."
-    )
+    parser = Parser(prog="isaac", description="ISAAC: recorded, replayable 2D rigid-body physics.")
     subparsers = parser.add_subparsers(dest="command", metavar="COMMAND")
     subparsers.required = True
     modules = (COMMANDS[command],) if command in COMMANDS else COMMAND_MODULES

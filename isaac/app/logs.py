@@ -22,13 +22,16 @@ import tempfile
 import time
 from pathlib import Path
 
+from isaac.app.options import integer, ip_address, port, url_host
 from isaac.errors import LogError
 
 
 def register(subparsers) -> None:
     p = subparsers.add_parser("inspect", help="summarise an MCAP log (or list one step's contacts)")
     p.add_argument("log", help="LOG.mcap (a .partial file from a killed run works too)")
-    p.add_argument("--step", type=int, metavar="K", help="print every contact of step K")
+    p.add_argument(
+        "--step", type=integer(minimum=0), metavar="K", help="print every contact of step K"
+    )
     p.add_argument(
         "--body", metavar="NAME", help="with --step: only the contacts of this body (a or b)"
     )
@@ -54,13 +57,19 @@ def register(subparsers) -> None:
     )
     v.add_argument(
         "--bind",
+        type=ip_address,
         default="127.0.0.1",
         metavar="ADDR",
-        help="address the viewer's servers listen on (default 127.0.0.1: this machine only)",
+        help="IP address the viewer's servers listen on (default 127.0.0.1: this machine only; "
+        "localhost is 127.0.0.1)",
     )
-    v.add_argument("--port", type=int, help="web viewer HTTP port (default: a free one)")
     v.add_argument(
-        "--grpc-port", type=int, help="the viewer's gRPC server port (default: a free one)"
+        "--port", type=port, help="web viewer HTTP port, 1-65535 (default or 0: a free one)"
+    )
+    v.add_argument(
+        "--grpc-port",
+        type=port,
+        help="the viewer's gRPC server port, 1-65535 (default or 0: a free one)",
     )
     v.add_argument(
         "--fresh", action="store_true", help="convert a .mcap again, even if its copy is current"
@@ -471,14 +480,78 @@ def _has_display() -> bool:
     return any(os.environ.get(k) for k in ("DISPLAY", "WAYLAND_DISPLAY", "WAYLAND_SOCKET"))
 
 
-def _free_port(bind: str) -> int:
-    """A TCP port free on ``bind`` now (the kernel's choice)."""
+def _ports(bind: str, wanted: dict[str, int | None]) -> dict[str, int]:
+    """The port of each option in ``wanted`` (``{"--grpc-port": 9877, "--port": None}``): the
+    one given, checked free on ``bind`` now, or a free one (the kernel's choice) for None or 0;
+    all held at once, so no two are the same. LogError (exit 2), before the viewer starts, in
+    one line: an address not of this machine (``--bind``), a port in use or not allowed to
+    this user, two options given one port."""
+    import errno
     import socket
 
+    given = [p for p in wanted.values() if p]
+    if len(set(given)) < len(given):
+        raise LogError(" and ".join(wanted) + f" must differ, got {given[0]} for both")
     family = socket.AF_INET6 if ":" in bind else socket.AF_INET
-    with socket.socket(family, socket.SOCK_STREAM) as s:
-        s.bind((bind, 0))
-        return s.getsockname()[1]
+    found, held = {}, []
+    try:
+        for option, port in wanted.items():
+            s = socket.socket(family, socket.SOCK_STREAM)
+            held.append(s)
+            # as the viewer's own listeners do: a port left in TIME_WAIT is free
+            s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+            try:
+                s.bind((bind, port or 0))
+            except OSError as exc:
+                if port and exc.errno in (errno.EADDRINUSE, errno.EACCES):
+                    raise LogError(
+                        f"{option} {port}: cannot listen on {bind}: {exc.strerror}"
+                    ) from None
+                raise LogError(
+                    f"--bind {bind}: cannot listen on it (an address of this machine, 127.0.0.1, "
+                    f"0.0.0.0 or ::): {exc.strerror or exc}"
+                ) from None
+            found[option] = s.getsockname()[1]
+    finally:
+        for s in held:
+            s.close()
+    return found
+
+
+# The watchdog of `isaac view`'s viewer, in the viewer's process group: it reads its stdin, a
+# pipe whose writing end `isaac view` alone holds, until end of file, which comes when `isaac
+# view` ends in any way (SIGKILL included: the kernel closes its files), and then kills its
+# process group, the viewer and whatever the viewer started. Signals to the group (the
+# clean-up's SIGTERM) leave it running, so that it outlives the viewer it watches.
+_WATCHDOG = (
+    "import os, signal\n"
+    "for s in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):\n"
+    "    signal.signal(s, signal.SIG_IGN)\n"
+    "while os.read(0, 512):\n"
+    "    pass\n"
+    "os.killpg(0, signal.SIGKILL)\n"
+)
+
+
+def _start_watchdog() -> tuple[subprocess.Popen, int]:
+    """(the watchdog, the pipe's writing end): the watchdog leads a new process group, which
+    the viewer is then started into (`cmd_view`); closing the writing end, or this process
+    ending, kills the group."""
+    read_end, write_end = os.pipe()  # neither is inherited by the viewer (O_CLOEXEC)
+    try:
+        watchdog = subprocess.Popen(
+            [sys.executable, "-I", "-S", "-c", _WATCHDOG],
+            stdin=read_end,
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.DEVNULL,
+            process_group=0,
+        )
+    except BaseException:
+        os.close(write_end)
+        raise
+    finally:
+        os.close(read_end)
+    return watchdog, write_end
 
 
 def _listening(host: str, port: int) -> bool:
@@ -553,21 +626,23 @@ def cmd_view(args: argparse.Namespace) -> int:
     signals = (signal.SIGTERM, signal.SIGHUP)
     previous = {sig: signal.signal(sig, _stop) for sig in signals}
     tmpdir = tempfile.mkdtemp(prefix="isaac-view-")
-    proc = None
+    proc = watchdog = watch_end = None
     try:
-        rrd = _viewable(path, fresh=args.fresh, tmpdir=tmpdir)
         web = args.web or not _has_display()
+        bind = args.bind  # an IP address (isaac.app.options.ip_address)
+        # before converting and before the viewer starts: the viewer's own refusal of an
+        # address or port is a usage text, or a viewer that never listens
+        ports = _ports(bind, {"--grpc-port": args.grpc_port, "--port": args.port if web else None})
+        grpc_port, http_port = ports["--grpc-port"], ports["--port"]
+        rrd = _viewable(path, fresh=args.fresh, tmpdir=tmpdir)
         if web and not args.web and not args.dry_run:
             print(
                 "isaac view: no display (DISPLAY and WAYLAND_DISPLAY unset): serving the web "
                 "viewer instead (as with --web)",
                 file=sys.stderr,
             )
-        bind = args.bind
-        grpc_port = args.grpc_port or _free_port(bind)
         command = [rerun_executable(), "--bind", bind, "--port", str(grpc_port)]
         if web:
-            http_port = args.port or _free_port(bind)
             command += ["--serve-web", "--web-viewer-port", str(http_port)]
         command.append(rrd)
         if args.dry_run:
@@ -576,20 +651,29 @@ def cmd_view(args: argparse.Namespace) -> int:
         # the viewer's own chatter (a first-run banner, INFO lines) goes to a file: shown only
         # if it fails
         out_path = os.path.join(tmpdir, "rerun.out")
+        watchdog, watch_end = _start_watchdog()
         with open(out_path, "wb") as out:
-            # a session of its own: a Ctrl-C reaches this process, which stops the viewer
+            # in the watchdog's process group, not this one: a Ctrl-C reaches this process,
+            # which stops the viewer; this process killed, the watchdog kills the group
             proc = subprocess.Popen(
-                command, stdout=out, stderr=subprocess.STDOUT, start_new_session=True
+                command,
+                stdin=subprocess.DEVNULL,
+                stdout=out,
+                stderr=subprocess.STDOUT,
+                process_group=watchdog.pid,
             )
         if web:
-            host = "127.0.0.1" if bind in ("0.0.0.0", "::", "") else bind
+            # every interface: the URL names this machine's loopback address of that family
+            host = {"0.0.0.0": "127.0.0.1", "::": "::1"}.get(bind, bind)
             while proc.poll() is None and not (
                 _listening(host, http_port) and _listening(host, grpc_port)
             ):
                 time.sleep(0.1)
             if proc.poll() is None:
-                proxy = f"rerun%2Bhttp%3A%2F%2F{host}%3A{grpc_port}%2Fproxy"
-                print(f"http://{host}:{http_port}/?url={proxy}", flush=True)
+                from urllib.parse import quote
+
+                proxy = quote(f"rerun+http://{url_host(host)}:{grpc_port}/proxy", safe="")
+                print(f"http://{url_host(host)}:{http_port}/?url={proxy}", flush=True)
                 print("isaac view: open the URL above; Ctrl-C stops the viewer", file=sys.stderr)
         status = proc.wait()
         if status != 0:
@@ -612,14 +696,17 @@ def cmd_view(args: argparse.Namespace) -> int:
             signal.signal(sig, signal.SIG_IGN)
         try:
             if proc is not None and proc.poll() is None:
-                # its session's process group (proc.pid): the viewer and anything it started
-                os.killpg(proc.pid, signal.SIGTERM)
+                # the watchdog's process group: the viewer and anything it started
+                os.killpg(watchdog.pid, signal.SIGTERM)
                 try:
                     proc.wait(timeout=10)
                 except subprocess.TimeoutExpired:
-                    os.killpg(proc.pid, signal.SIGKILL)
+                    os.killpg(watchdog.pid, signal.SIGKILL)
                     proc.wait()
         finally:
+            if watch_end is not None:
+                os.close(watch_end)  # the watchdog kills what is left of the group, and itself
+                watchdog.wait()
             shutil.rmtree(tmpdir, ignore_errors=True)
             for sig, handler in previous.items():
                 signal.signal(sig, handler)

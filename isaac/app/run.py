@@ -9,14 +9,25 @@ import sys
 import time
 from itertools import chain
 
-from isaac.errors import IsaacError, LogError, SimulationError
+from isaac.app.options import integer
+from isaac.errors import LogError, SimulationError
+
+
+def _steps(text: str) -> int:
+    """--steps: 0 to a scene's own bound on world.steps (isaac.scene.limits.MAX_STEPS)."""
+    from isaac.scene.limits import MAX_STEPS  # numpy: imported once --steps is given
+
+    return integer(minimum=0, maximum=MAX_STEPS)(text)
 
 
 def register(subparsers) -> None:
     run = subparsers.add_parser("run", help="run a scene (optionally recording it)")
     run.add_argument("scene", help="scene YAML file")
     run.add_argument(
-        "--steps", type=int, default=None, help="number of steps (default: the scene's world.steps)"
+        "--steps",
+        type=_steps,
+        default=None,
+        help="number of steps (default: the scene's world.steps; at most 100000000, as there)",
     )
     run.add_argument("--mcap", metavar="OUT.mcap", help="record the run to this MCAP log")
     run.add_argument("--rrd", metavar="OUT.rrd", help="record the run to this Rerun recording")
@@ -358,8 +369,6 @@ def cmd_run(args: argparse.Namespace) -> int:
 
         scene = load_scene(args.scene)
         steps = scene.world.steps if args.steps is None else args.steps
-        if steps < 0:
-            raise IsaacError(f"--steps must be >= 0, got {steps}")
         _warn("run", scene, steps)
         _prepare_sender(children, claims, scene)
         offload = _plan_recording(args, claims, scene, steps) if claims else args.offload

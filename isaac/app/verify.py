@@ -14,6 +14,7 @@ import argparse
 import sys
 from pathlib import Path
 
+from isaac.app.options import integer, number
 from isaac.errors import LogError
 from replay.report import DEFAULT_MAX_REPORTED, Report, format_text, to_json
 
@@ -21,15 +22,17 @@ from replay.report import DEFAULT_MAX_REPORTED, Report, format_text, to_json
 def _common(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--from-step",
-        type=int,
+        type=integer(minimum=0),
         metavar="K",
         default=None,
         help="start from the state logged at step K (every logged step is a keyframe)",
     )
-    p.add_argument("--to-step", type=int, metavar="M", default=None, help="stop after step M")
+    p.add_argument(
+        "--to-step", type=integer(minimum=0), metavar="M", default=None, help="stop after step M"
+    )
     p.add_argument(
         "--tolerance",
-        type=float,
+        type=number(minimum=0.0),
         metavar="X",
         default=None,
         help="compare floats within |a - b| <= X * (1 + |a|) instead of bit for bit "
@@ -43,7 +46,7 @@ def _common(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument(
         "--max-reported",
-        type=int,
+        type=integer(minimum=1),
         default=DEFAULT_MAX_REPORTED,
         metavar="N",
         help=f"with --all, list at most N differing steps (default {DEFAULT_MAX_REPORTED})",
@@ -95,16 +98,6 @@ def register(subparsers) -> None:
     d.set_defaults(func=cmd_diff)
 
 
-def _check(args: argparse.Namespace) -> None:
-    for option, value in (("--from-step", args.from_step), ("--to-step", args.to_step)):
-        if value is not None and value < 0:  # (a negative step read as the log's first or none)
-            raise LogError(f"{option} must be >= 0, got {value}")
-    if args.tolerance is not None and not args.tolerance >= 0:
-        raise LogError(f"--tolerance must be >= 0, got {args.tolerance}")
-    if args.max_reported < 1:
-        raise LogError(f"--max-reported must be >= 1, got {args.max_reported}")
-
-
 def _finish(report: Report, args: argparse.Namespace) -> int:
     text = format_text(report, all_steps=args.all_steps)
     if args.json == "-":
@@ -121,7 +114,6 @@ def _finish(report: Report, args: argparse.Namespace) -> int:
 
 
 def cmd_replay(args: argparse.Namespace) -> int:
-    _check(args)
     from replay.compare import replay_log
 
     report = replay_log(
@@ -137,7 +129,6 @@ def cmd_replay(args: argparse.Namespace) -> int:
 
 
 def cmd_diff(args: argparse.Namespace) -> int:
-    _check(args)
     from replay.compare import diff_logs
 
     report = diff_logs(

@@ -8,6 +8,10 @@ import os
 import signal
 import threading
 
+# the most worker processes a local cluster starts (`--workers`): each is a Python process
+# with numba's kernels loaded; past this a machine spends its time starting them
+MAX_LOCAL_WORKERS = 256
+
 
 class _IgnoreInterrupt:
     """Worker plugin of the local cluster: Ctrl-C reaches every process of the terminal's group;
@@ -46,7 +50,13 @@ def start_cluster(scheduler, workers):
 
     address = scheduler or os.environ.get("DASK_SCHEDULER_ADDRESS")
     if address:
-        return Client(address), None
+        try:
+            return Client(address), None
+        except (OSError, ValueError, TypeError) as exc:  # unreachable, or a malformed address
+            from isaac.errors import IsaacError
+
+            said = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+            raise IsaacError(f"cannot use the Dask scheduler at {address}: {said}") from None
     n = workers or len(os.sched_getaffinity(0))  # one worker process per core we may use
     with _interrupt_held() as interrupted:
         client = cluster = None

@@ -40,8 +40,9 @@ import threading
 import time
 from dataclasses import dataclass, field
 
+from isaac.app.options import integer, server_address
 from isaac.app.sweep import worker as work
-from isaac.app.sweep.cluster import result_noting, start_cluster
+from isaac.app.sweep.cluster import MAX_LOCAL_WORKERS, result_noting, start_cluster
 from isaac.app.sweep.spec import Sweep, SweepError, load_runs, load_sweep, refusal
 from isaac.errors import IsaacError
 
@@ -115,16 +116,20 @@ def register(subparsers) -> None:
     )
     p.add_argument(
         "--scheduler",
+        type=server_address,
         metavar="ADDRESS",
         help="run on this Dask scheduler (tcp://HOST:8786; default: $DASK_SCHEDULER_ADDRESS, "
         "else a local cluster); OUT must then be an absolute path every worker can write",
     )
     p.add_argument(
-        "--workers", type=int, metavar="N", help="local cluster size (default: one per core)"
+        "--workers",
+        type=integer(minimum=1, maximum=MAX_LOCAL_WORKERS),
+        metavar="N",
+        help=f"local cluster size (default: one per core; at most {MAX_LOCAL_WORKERS})",
     )
     p.add_argument(
         "--chunk",
-        type=int,
+        type=integer(minimum=1),
         metavar="K",
         help=f"runs per task (default: up to {MAX_CHUNK}, fewer towards the end)",
     )
@@ -239,8 +244,8 @@ def execute(
             "write (the workers write the logs there)",
             source=sweep.path,
         )
-    if workers is not None and workers < 1:
-        raise IsaacError(f"--workers must be >= 1, got {workers}")
+    if workers is not None and not 1 <= workers <= MAX_LOCAL_WORKERS:
+        raise IsaacError(f"--workers must be >= 1 and <= {MAX_LOCAL_WORKERS}, got {workers}")
     if chunk is not None and chunk < 1:
         raise IsaacError(f"--chunk must be >= 1, got {chunk}")
     # a cluster that runs already costs nothing to ask: every run is checked there

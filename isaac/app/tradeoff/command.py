@@ -6,11 +6,17 @@ import argparse
 import sys
 from pathlib import Path
 
+from isaac.app.options import integer, number
 from isaac.app.tradeoff.grid import parse_grid
 from isaac.app.tradeoff.measure import measure
 from isaac.app.tradeoff.report import format_table, plot, write_csv
 from isaac.app.tradeoff.trajectory import MIN_TIMED_SECONDS
 from isaac.scene import load_scene
+
+# bounds of the options whose larger values would run for days: the timed rounds and the
+# seconds timed per point in a round
+MAX_REPEATS = 1000
+MAX_MIN_TIME = 3600.0  # s
 
 
 def register(subparsers) -> None:
@@ -41,25 +47,32 @@ def register(subparsers) -> None:
     )
     p.add_argument(
         "--reference-dt",
-        type=float,
+        type=number(minimum=0.0, above=True, maximum=1.0),
         default=None,
         metavar="S",
-        help="dt of the accurate reference (default: the scene's dt / 8)",
+        help="dt of the accurate reference, in (0, 1] s (default: the scene's dt / 8)",
     )
     p.add_argument(
         "--duration",
-        type=float,
+        type=number(minimum=0.0, above=True),
         default=None,
         metavar="S",
-        help="simulated seconds (default: the scene's steps x dt)",
+        help="simulated seconds (default: the scene's steps x dt); at most 100000000 steps of "
+        "the finest dt run",
     )
-    p.add_argument("--repeats", type=int, default=3, help="timed runs per setting (median)")
+    p.add_argument(
+        "--repeats",
+        type=integer(minimum=1, maximum=MAX_REPEATS),
+        default=3,
+        help=f"timed runs per setting (median; default 3, at most {MAX_REPEATS})",
+    )
     p.add_argument(
         "--min-time",
-        type=float,
+        type=number(minimum=0.0, maximum=MAX_MIN_TIME),
         default=MIN_TIMED_SECONDS,
         metavar="S",
-        help=f"repeat short runs until this many seconds were timed (default {MIN_TIMED_SECONDS})",
+        help="repeat short runs until this many seconds were timed "
+        f"(default {MIN_TIMED_SECONDS}, at most {MAX_MIN_TIME:g})",
     )
     p.add_argument("--csv", metavar="OUT.csv", help="CSV path (default: SCENE_tradeoff.csv here)")
     p.add_argument("--png", metavar="OUT.png", help="plot path (default: SCENE_tradeoff.png)")

@@ -18,6 +18,7 @@ from isaac.app.tradeoff.trajectory import (
     warm_up,
 )
 from isaac.scene import Scene, checks
+from isaac.scene.limits import MAX_STEPS
 
 COLUMNS = (
     "setting",
@@ -101,6 +102,16 @@ def measure(
     duration = w.steps * w.dt if duration is None else float(duration)
     if not duration > 0.0:
         raise TradeoffError(f"--duration must be > 0, got {duration}")
+    # the reference's dt: the accurate preset's, given or made from the scene's and the grid's
+    ref_dt = reference_dt or min(w.dt / REFERENCE_DT_DIVISOR, min(p.dt for p in grid) / 4)
+    finest = min(p.dt for p in grid)
+    if reference == "accurate":
+        finest = min(finest, ref_dt)
+    if duration / finest > MAX_STEPS:  # a scene's own bound on world.steps
+        raise TradeoffError(
+            f"--duration {duration:g} s is {duration / finest:.3g} steps of the finest dt run "
+            f"({finest:g} s), more than the {MAX_STEPS} a run may take"
+        )
     sample_dt = max(p.dt for p in grid)
     times = sample_times(duration, sample_dt)
     if times.shape[0] < 2:
@@ -133,7 +144,6 @@ def measure(
             ref_row = dict(setting="analytic", dt=0.0)
             ref_cost = math.nan
         elif reference == "accurate":
-            ref_dt = reference_dt or min(w.dt / REFERENCE_DT_DIVISOR, min(p.dt for p in grid) / 4)
             ref_point = GridPoint("accurate (reference)", ref_dt, (("preset", "accurate"),))
             ref_scene = replace(scene, world=ref_point.world(w, duration))
             if bar:
