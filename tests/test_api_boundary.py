@@ -415,18 +415,20 @@ def test_the_cli_refuses_a_negative_or_fractional_step_option_in_one_line(tmp_pa
     log = ROOT / "tests" / "fixtures" / "golden" / "head_on.mcap"
     (tmp_path / "s.yaml").write_text(scene_text(2))
     isaac = [sys.executable, "-m", "isaac"]
-    for argv, words in (
-        (["run", str(tmp_path / "s.yaml"), "--steps", "-3"], "--steps must be >= 0, got -3"),
-        (["replay", str(log), "--from-step", "-3"], "--from-step must be >= 0, got -3"),
-        (["replay", str(log), "--to-step", "-1"], "--to-step must be >= 0, got -1"),
-        (["diff", str(log), str(log), "--from-step", "-2"], "--from-step must be >= 0, got -2"),
-        (["diff", str(log), str(log), "--to-step", "-2"], "--to-step must be >= 0, got -2"),
-        (["run", str(tmp_path / "s.yaml"), "--steps", "2.5"], "invalid int value: '2.5'"),
+    for argv in (
+        ["run", str(tmp_path / "s.yaml"), "--steps", "-3"],
+        ["replay", str(log), "--from-step", "-3"],
+        ["replay", str(log), "--to-step", "-1"],
+        ["diff", str(log), str(log), "--from-step", "-2"],
+        ["diff", str(log), str(log), "--to-step", "-2"],
+        ["run", str(tmp_path / "s.yaml"), "--steps", "2.5"],
     ):
         got = subprocess.run([*isaac, *argv], cwd=ROOT, capture_output=True, text=True)
         assert got.returncode == 2, (argv, got.stderr)
-        last = got.stderr.strip().splitlines()[-1]
-        assert words in last and "Traceback" not in got.stderr, (argv, got.stderr)
+        lines = got.stderr.strip().splitlines()
+        option, value = argv[-2:]
+        assert len(lines) == 1 and f"argument {option}:" in lines[0], (argv, got.stderr)
+        assert f"got '{value}'" in lines[0], (argv, got.stderr)
     # a run of no steps is still one (its batches of 0 and max(0 - 1, 0) steps)
     none = subprocess.run([*isaac, "run", str(tmp_path / "s.yaml"), "--steps", "0"], cwd=ROOT)
     assert none.returncode == 0
