@@ -20,6 +20,7 @@ Conventions (world frame, m, y up):
 
 from __future__ import annotations
 
+import inspect
 import math
 
 import numpy as np
@@ -267,42 +268,35 @@ def pile(
 
 # --- reading a scene's `generators:` items --------------------------------------------------
 
-_PYRAMID_KEYS = (
-    "rows",
-    "box",
-    "base",
-    "spacing",
-    "density",
-    "restitution",
-    "friction",
-    "name",
-    "ground",
-)
-_PILE_KEYS = (
-    "count",
-    "seed",
-    "sides",
-    "radius",
-    "container",
-    "density",
-    "restitution",
-    "friction",
-    "name",
-)
+# the options are the generators' keywords, in order; the pile's container keys sit together
+# under `container:`
+_PYRAMID_KEYS = tuple(inspect.signature(pyramid).parameters)
 _CONTAINER_KEYS = ("width", "height", "thickness", "position")
+_PILE_KEYS = tuple(
+    dict.fromkeys(
+        "container" if key in _CONTAINER_KEYS else key for key in inspect.signature(pile).parameters
+    )
+)
 
 
-def _prefix(r: Reader, m: dict, path: str, default: str, suffix: int, pattern: str) -> str:
-    """The generator's `name`: its bodies are named PREFIX + a suffix of up to `suffix`
-    characters, and every name must fit MAX_NAME_LENGTH."""
+# how each generator names its bodies, as the refusal of a too long `name` says it
+_NAMING = {
+    "pyramid": "NAME/ROW/COLUMN and NAME/ground",
+    "pile": "NAME/1 .. NAME/COUNT, NAME/floor, NAME/left and NAME/right",
+}
+
+
+def _prefix(r: Reader, m: dict, path: str, kind: str, suffix: int) -> str:
+    """The `kind` generator's `name` (default: `kind`): its bodies are named PREFIX + a suffix
+    of up to `suffix` characters, and every name must fit MAX_NAME_LENGTH."""
     if "name" not in m:
-        return default
+        return kind
     node = m["name"][1]
     name = r.name(node, join_path(path, "name"))
     if len(name) + suffix > MAX_NAME_LENGTH:
         raise r.fail(
             f"a name of {len(name)} characters is too long here: this generator names its "
-            f"bodies {pattern}, adding up to {suffix} characters, and a name has at most "
+            f"bodies {_NAMING[kind]}, adding up to {suffix} characters, and a name has at most "
             f"{MAX_NAME_LENGTH} (use at most {MAX_NAME_LENGTH - suffix})",
             node,
             join_path(path, "name"),
@@ -320,14 +314,7 @@ def _read_pyramid(r: Reader, node, path: str) -> tuple[dict, int]:
         box=r.pair(m["box"][1], join_path(path, "box"), MIN_SIZE, MAX_SIZE, names="w, h"),
         base=optional(r.pair, m, "base", path, (0.0, 0.0), -MAX_COORDINATE, MAX_COORDINATE),
         spacing=optional(r.number, m, "spacing", path, 0.0, 0.0, MAX_SIZE),
-        name=_prefix(
-            r,
-            m,
-            path,
-            "pyramid",
-            pyramid_suffix_length(rows, ground),
-            "NAME/ROW/COLUMN and NAME/ground",
-        ),
+        name=_prefix(r, m, path, "pyramid", pyramid_suffix_length(rows, ground)),
         ground=ground,
         **material(r, m, path),
     )
@@ -343,9 +330,8 @@ def read_pile(r: Reader, node, path: str) -> tuple[dict, int]:
     if "sides" in m:
         sides_path = join_path(path, "sides")
         items = r.sequence(m["sides"][1], sides_path, min_len=2, max_len=2, what="numbers")
-        sides = (
-            r.integer(items[0], f"{sides_path}[0]", 3, MAX_VERTICES),
-            r.integer(items[1], f"{sides_path}[1]", 3, MAX_VERTICES),
+        sides = tuple(
+            r.integer(item, f"{sides_path}[{k}]", 3, MAX_VERTICES) for k, item in enumerate(items)
         )
         if sides[0] > sides[1]:
             raise r.fail("min sides is greater than max sides", m["sides"][1], sides_path)
@@ -374,14 +360,7 @@ def read_pile(r: Reader, node, path: str) -> tuple[dict, int]:
         seed=optional(r.integer, m, "seed", path, 0, 0, 2**63 - 1),
         sides=sides,
         radius=radius,
-        name=_prefix(
-            r,
-            m,
-            path,
-            "pile",
-            pile_suffix_length(count),
-            "NAME/1 .. NAME/COUNT, NAME/floor, NAME/left and NAME/right",
-        ),
+        name=_prefix(r, m, path, "pile", pile_suffix_length(count)),
         **container,
         **material(r, m, path),
     )

@@ -44,16 +44,12 @@ def load_scene(path) -> Scene:
     source = str(path)
     p = Path(path)
     try:
-        kind = _not_a_file(os.stat(p).st_mode)
-        if kind:
-            raise SceneError(f"is {kind}, not a scene file", source=source)
+        _refuse_unless_file(os.stat(p).st_mode, source)
         # O_NONBLOCK: should the path have become a FIFO since the stat, opening it does not
         # wait for a writer, and fstat below refuses it.
         fd = os.open(p, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0))
         with open(fd, "rb") as f:
-            kind = _not_a_file(os.fstat(f.fileno()).st_mode)
-            if kind:
-                raise SceneError(f"is {kind}, not a scene file", source=source)
+            _refuse_unless_file(os.fstat(f.fileno()).st_mode, source)
             data = f.read(MAX_SCENE_BYTES + 1)
     except SceneError:
         raise
@@ -76,18 +72,20 @@ def load_scene(path) -> Scene:
     return load_scene_text(text, source=source, default_name=p.stem)
 
 
-def _not_a_file(mode: int) -> str | None:
-    if stat.S_ISREG(mode):
-        return None
-    if stat.S_ISDIR(mode):
-        return "a directory"
-    if stat.S_ISFIFO(mode):
-        return "a FIFO (named pipe)"
-    if stat.S_ISSOCK(mode):
-        return "a socket"
-    if stat.S_ISCHR(mode) or stat.S_ISBLK(mode):
-        return "a device"
-    return "not a regular file"
+_NOT_FILES = (
+    (stat.S_ISDIR, "a directory"),
+    (stat.S_ISFIFO, "a FIFO (named pipe)"),
+    (stat.S_ISSOCK, "a socket"),
+    (stat.S_ISCHR, "a device"),
+    (stat.S_ISBLK, "a device"),
+)
+
+
+def _refuse_unless_file(mode: int, source: str) -> None:
+    """SceneError unless `mode` (an st_mode) is a regular file's, saying what it is instead."""
+    if not stat.S_ISREG(mode):
+        kind = next((kind for test, kind in _NOT_FILES if test(mode)), "not a regular file")
+        raise SceneError(f"is {kind}, not a scene file", source=source)
 
 
 def load_scene_text(text: str, source: str = "<text>", *, default_name: str | None = None) -> Scene:
