@@ -190,9 +190,10 @@ def test_circles_round_trip_through_the_log_text_and_its_fast_reader():
     text = scene_to_yaml(scene)
     assert "shape: {circle: {radius: 0.3}}" in text
     assert load_scene_text(text, "<test>") == scene
-    from isaac.scene.loader import _body_alone, _read_head
+    from isaac.scene.bodies import body_alone
+    from isaac.scene.loader import read_head
 
-    fast = fast_read(text, "<test>", "inline", _read_head, _body_alone)
+    fast = fast_read(text, "<test>", "inline", read_head, body_alone)
     assert fast is not None and fast == scene
 
 

@@ -13,8 +13,10 @@ import pytest
 from isaac.app.run import cmd_check
 from isaac.errors import SceneError
 from isaac.scene import checks, fast_reader, load_scene, load_scene_text, loader, scene_to_yaml
+from isaac.scene.bodies import body_alone
 from isaac.scene.checks import first_joint_problem, joint_problem
-from isaac.scene.reader import Reader, compose
+from isaac.scene.joints import joint_alone
+from isaac.scene.reader import compose
 from isaac.scene.spec import JointSpec
 
 BODIES = """\
@@ -216,13 +218,11 @@ def test_round_trip_bit_for_bit_through_both_readers():
     back = load_scene_text(text, source=scene.source)
     assert back == scene and bits(back) == bits(scene)
     assert scene_to_yaml(back) == text
-    fast = fast_reader.read(
-        text, scene.source, "x", loader._read_head, loader._body_alone, loader._joint_alone
-    )
+    fast = fast_reader.read(text, scene.source, "x", loader.read_head, body_alone, joint_alone)
     assert fast is not None, "the fast reader read the writer's joints"
     assert fast == scene and bits(fast) == bits(scene)
     # the YAML reader alone agrees (the text parsed as a node tree)
-    tree = loader._read_scene(Reader(scene.source), compose(text, scene.source), "x")
+    tree = loader.read_scene_tree(compose(text, scene.source), scene.source, default_name="x")
     assert tree == scene and bits(tree) == bits(scene)
 
 
@@ -467,10 +467,8 @@ def _both_readers(text):
     the YAML reader alone, on `text`."""
     errors = []
     for read in (
-        lambda: fast_reader.read(
-            text, "log", "x", loader._read_head, loader._body_alone, loader._joint_alone
-        ),
-        lambda: loader._read_scene(Reader("log"), compose(text, "log"), "x"),
+        lambda: fast_reader.read(text, "log", "x", loader.read_head, body_alone, joint_alone),
+        lambda: loader.read_scene_tree(compose(text, "log"), "log", default_name="x"),
     ):
         with pytest.raises(SceneError) as caught:
             read()
@@ -503,7 +501,7 @@ def test_fast_reader_reads_hand_edited_joints_alone():
     start = text.index("    length: 0.1\n")
     edited = text[:start] + text[start + len("    length: 0.1\n") :]
     a = load_scene_text(edited, source="log")
-    b = loader._read_scene(Reader("log"), compose(edited, "log"), "x")
+    b = loader.read_scene_tree(compose(edited, "log"), "log", default_name="x")
     assert a == b and bits(a) == bits(b)
     assert a.joints[3].length != 0.1
 
@@ -647,10 +645,8 @@ def test_random_scenes_round_trip_bit_for_bit():
         problem = first_joint_problem(scene.bodies, scene.joints)
         assert problem is None, (seed, problem)
         text = scene_to_yaml(scene)
-        fast = fast_reader.read(
-            text, "r", "x", loader._read_head, loader._body_alone, loader._joint_alone
-        )
-        tree = loader._read_scene(Reader("r"), compose(text, "r"), "x")
+        fast = fast_reader.read(text, "r", "x", loader.read_head, body_alone, joint_alone)
+        tree = loader.read_scene_tree(compose(text, "r"), "r", default_name="x")
         for back in (fast, tree):
             assert back is not None and back == scene and bits(back) == bits(scene), seed
         assert scene_to_yaml(fast) == text

@@ -14,7 +14,7 @@ import pytest
 from isaac.errors import SceneError
 from isaac.scene import load_scene_text
 from isaac.scene.checks import first_joint_problem, joint_problem
-from isaac.scene.loader import to_body_frame
+from isaac.scene.joints import to_body_frame
 from isaac.scene.spec import JointSpec
 from isaac.scene.warnings import scene_warnings
 

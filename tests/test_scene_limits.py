@@ -11,8 +11,7 @@ from pathlib import Path
 import pytest
 
 from isaac.errors import SceneError
-from isaac.scene import load_scene, load_scene_text, scene_to_yaml
-from isaac.scene import loader as scene_loader
+from isaac.scene import generators, load_scene, load_scene_text, scene_to_yaml
 from isaac.scene.limits import (
     MAX_BODY_NODES,
     MAX_LIST_ITEMS,
@@ -208,7 +207,7 @@ def test_the_pile_count_limit_is_the_documented_one():
 
     def read(count: int):
         root = compose(f"pile: {{count: {count}}}\n", "s.yaml")
-        return scene_loader._read_pile(r, r.mapping(root, "", None)["pile"][1], "pile")
+        return generators.read_pile(r, r.mapping(root, "", None)["pile"][1], "pile")
 
     assert read(MAX_PILE_COUNT)[1] == MAX_PILE_COUNT + 3  # the bodies it makes: exactly MAX_BODIES
     with pytest.raises(SceneError, match=f"must be 1..{MAX_PILE_COUNT}"):

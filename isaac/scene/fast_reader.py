@@ -93,13 +93,14 @@ def read(
     read_head(reader, root, default_name) -> (mapping, name, world, analytic),
     body_alone(reader, text, line, index) -> SceneError | None and
     joint_alone(reader, text, line, index, bodies, index_of) -> JointSpec are the YAML reader's
-    (isaac.scene.loader): the first reads the head lines; the second reads one body's lines
-    (starting at `line`, as body `index`) and returns the error it finds, for the message about a
-    body that fails its checks; the third reads one joint's lines as joints[index] (`index_of`:
-    the bodies' indices by name) and raises the error it finds. A joint whose lines match but do
-    not fit its kind or fail the checks is read by `joint_alone`, so the message (or the joint)
-    is the YAML reader's. Without `joint_alone` a text with joints is left to the YAML reader.
-    Raises SceneError for a text in this form that the YAML reader refuses.
+    (isaac.scene.loader.read_head, isaac.scene.bodies.body_alone and
+    isaac.scene.joints.joint_alone): the first reads the head lines; the second reads one body's
+    lines (starting at `line`, as body `index`) and returns the error it finds, for the message
+    about a body that fails its checks; the third reads one joint's lines as joints[index]
+    (`index_of`: the bodies' indices by name) and raises the error it finds. A joint whose lines
+    match but do not fit its kind or fail the checks is read by `joint_alone`, so the message (or
+    the joint) is the YAML reader's. Without `joint_alone` a text with joints is left to the YAML
+    reader. Raises SceneError for a text in this form that the YAML reader refuses.
     """
     head = _HEAD.match(text)
     if head is None:

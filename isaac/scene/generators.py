@@ -5,9 +5,11 @@ expanded scene) only ever sees the bodies it produced. Randomness comes from
 ``numpy.random.default_rng(seed)`` and is drawn in a fixed order, so one seed gives one scene on
 one numpy version; logs do not depend on it because they store the expansion, not the seed.
 
-The scene loader (isaac/scene.py) checks types and ranges of every option before calling these
-functions; a generator raises `GeneratorError` only for problems that depend on several options
-together (a container too small for its bodies), naming the option to change.
+`expand` reads a `generators:` item, checks the types and ranges of its options and calls
+`pyramid` or `pile`; these raise `GeneratorError` only for problems that depend on several
+options together (a container too small for its bodies), naming the option to change, and
+`expand` turns that into the SceneError at that option. `refusal` does the same for the checks'
+refusal of a body a generator made (isaac.scene.checks).
 
 Conventions (world frame, m, y up):
 * `pyramid`: row 1 is the bottom row (`rows` boxes), row `rows` the top (1 box); columns count
@@ -18,12 +20,26 @@ Conventions (world frame, m, y up):
 
 from __future__ import annotations
 
+import inspect
 import math
 
 import numpy as np
 
 from isaac import trig
-from isaac.scene.polygon import box_vertices, mass_properties
+from isaac.errors import SceneError
+from isaac.scene.bodies import box_tuple, material, vertices_tuple
+from isaac.scene.limits import (
+    MAX_BODIES,
+    MAX_COORDINATE,
+    MAX_NAME_LENGTH,
+    MAX_PILE_COUNT,
+    MAX_PYRAMID_ROWS,
+    MAX_SIZE,
+    MAX_VERTICES,
+    MIN_SIZE,
+)
+from isaac.scene.polygon import mass_properties
+from isaac.scene.reader import MappingNode, Reader, join_path, optional, scalar_or_none, shown
 from isaac.scene.spec import BodySpec
 
 # Each pile body gets a square cell of side CELL_MARGIN * 2 * max radius, so bodies start apart.
@@ -54,10 +70,6 @@ def pyramid_suffix_length(rows: int, ground: bool) -> int:
     return max(longest, len("/ground")) if ground else longest
 
 
-def _vertex_tuple(vertices: np.ndarray) -> tuple[tuple[float, float], ...]:
-    return tuple((float(x), float(y)) for x, y in vertices)
-
-
 def _concrete_box(
     name: str,
     width: float,
@@ -68,7 +80,7 @@ def _concrete_box(
 ) -> BodySpec:
     return BodySpec(
         name=name,
-        vertices=_vertex_tuple(box_vertices(width, height)),
+        vertices=box_tuple(width, height),
         position=centre,
         restitution=restitution,
         friction=friction,
@@ -100,7 +112,7 @@ def pyramid(
     """
     width, height = box
     pitch = width + spacing
-    vertices = _vertex_tuple(box_vertices(width, height))
+    vertices = box_tuple(width, height)
     bodies = []
     if ground:
         ground_width = rows * width + (rows - 1) * spacing + 4.0 * width
@@ -243,7 +255,7 @@ def pile(
         bodies.append(
             BodySpec(
                 name=f"{name}/{i + 1}",
-                vertices=_vertex_tuple(local),
+                vertices=vertices_tuple(local),
                 position=(float(pos[0]), float(pos[1])),
                 angle=angle,
                 density=density,
@@ -252,3 +264,177 @@ def pile(
             )
         )
     return bodies
+
+
+# --- reading a scene's `generators:` items --------------------------------------------------
+
+# the options are the generators' keywords, in order; the pile's container keys sit together
+# under `container:`
+_PYRAMID_KEYS = tuple(inspect.signature(pyramid).parameters)
+_CONTAINER_KEYS = ("width", "height", "thickness", "position")
+_PILE_KEYS = tuple(
+    dict.fromkeys(
+        "container" if key in _CONTAINER_KEYS else key for key in inspect.signature(pile).parameters
+    )
+)
+
+
+# how each generator names its bodies, as the refusal of a too long `name` says it
+_NAMING = {
+    "pyramid": "NAME/ROW/COLUMN and NAME/ground",
+    "pile": "NAME/1 .. NAME/COUNT, NAME/floor, NAME/left and NAME/right",
+}
+
+
+def _prefix(r: Reader, m: dict, path: str, kind: str, suffix: int) -> str:
+    """The `kind` generator's `name` (default: `kind`): its bodies are named PREFIX + a suffix
+    of up to `suffix` characters, and every name must fit MAX_NAME_LENGTH."""
+    if "name" not in m:
+        return kind
+    node = m["name"][1]
+    name = r.name(node, join_path(path, "name"))
+    if len(name) + suffix > MAX_NAME_LENGTH:
+        raise r.fail(
+            f"a name of {len(name)} characters is too long here: this generator names its "
+            f"bodies {_NAMING[kind]}, adding up to {suffix} characters, and a name has at most "
+            f"{MAX_NAME_LENGTH} (use at most {MAX_NAME_LENGTH - suffix})",
+            node,
+            join_path(path, "name"),
+        )
+    return name
+
+
+def _read_pyramid(r: Reader, node, path: str) -> tuple[dict, int]:
+    m = r.mapping(node, path, _PYRAMID_KEYS)
+    r.require(m, ("rows", "box"), node, path)
+    rows = r.integer(m["rows"][1], join_path(path, "rows"), 1, MAX_PYRAMID_ROWS)
+    ground = optional(r.boolean, m, "ground", path, True)
+    options = dict(
+        rows=rows,
+        box=r.pair(m["box"][1], join_path(path, "box"), MIN_SIZE, MAX_SIZE, names="w, h"),
+        base=optional(r.pair, m, "base", path, (0.0, 0.0), -MAX_COORDINATE, MAX_COORDINATE),
+        spacing=optional(r.number, m, "spacing", path, 0.0, 0.0, MAX_SIZE),
+        name=_prefix(r, m, path, "pyramid", pyramid_suffix_length(rows, ground)),
+        ground=ground,
+        **material(r, m, path),
+    )
+    return options, rows * (rows + 1) // 2 + (1 if ground else 0)
+
+
+def read_pile(r: Reader, node, path: str) -> tuple[dict, int]:
+    """(keyword arguments of `pile`, bodies it makes) of a `pile:` mapping `node` at `path`."""
+    m = r.mapping(node, path, _PILE_KEYS)
+    r.require(m, ("count",), node, path)
+    count = r.integer(m["count"][1], join_path(path, "count"), 1, MAX_PILE_COUNT)
+    sides = (3, 8)
+    if "sides" in m:
+        sides_path = join_path(path, "sides")
+        items = r.sequence(m["sides"][1], sides_path, min_len=2, max_len=2, what="numbers")
+        sides = tuple(
+            r.integer(item, f"{sides_path}[{k}]", 3, MAX_VERTICES) for k, item in enumerate(items)
+        )
+        if sides[0] > sides[1]:
+            raise r.fail("min sides is greater than max sides", m["sides"][1], sides_path)
+    radius = optional(r.pair, m, "radius", path, (0.2, 0.5), MIN_SIZE, MAX_SIZE)
+    if radius[0] > radius[1]:
+        raise r.fail(
+            "min radius is greater than max radius", m["radius"][1], join_path(path, "radius")
+        )
+    container = {}
+    if "container" in m:
+        cpath = join_path(path, "container")
+        c = r.mapping(m["container"][1], cpath, _CONTAINER_KEYS)
+        height = None  # null or left out: just tall enough for the starting grid
+        if "height" in c and scalar_or_none(c["height"][1]) is not None:
+            height = r.number(c["height"][1], join_path(cpath, "height"), MIN_SIZE, MAX_SIZE)
+        container = dict(
+            width=optional(r.number, c, "width", cpath, 10.0, MIN_SIZE, MAX_SIZE),
+            height=height,
+            thickness=optional(r.number, c, "thickness", cpath, 0.5, MIN_SIZE, MAX_SIZE),
+            position=optional(
+                r.pair, c, "position", cpath, (0.0, 0.0), -MAX_COORDINATE, MAX_COORDINATE
+            ),
+        )
+    options = dict(
+        count=count,
+        seed=optional(r.integer, m, "seed", path, 0, 0, 2**63 - 1),
+        sides=sides,
+        radius=radius,
+        name=_prefix(r, m, path, "pile", pile_suffix_length(count)),
+        **container,
+        **material(r, m, path),
+    )
+    return options, count + 3
+
+
+def expand(r: Reader, node, path: str, room: int):
+    """(kind, options node, key path, name prefix, bodies) of `generators:` item `node` (read
+    at `path`), which may make at most `room` bodies."""
+    m = r.mapping(node, path, ("pyramid", "pile"))
+    if len(m) != 1:
+        raise r.fail("each generator has exactly one key: pyramid or pile", node, path)
+    kind, (_, options_node) = next(iter(m.items()))
+    path = join_path(path, kind)
+    reader = _read_pyramid if kind == "pyramid" else read_pile
+    options, size = reader(r, options_node, path)
+    if size > room:
+        raise r.fail(
+            f"this generator makes {size} bodies; with the others the scene would "
+            f"exceed {MAX_BODIES} bodies",
+            options_node,
+            path,
+        )
+    try:
+        bodies = (pyramid if kind == "pyramid" else pile)(**options)
+    except GeneratorError as exc:
+        key_node = option_node(r, options_node, path, exc.key) or options_node
+        raise r.fail(exc.what, key_node, join_path(path, exc.key)) from None
+    return kind, options_node, path, options["name"], bodies
+
+
+def option_node(r: Reader, options_node, path: str, key: str):
+    """The node of option `key` ("container.height") if the scene gives it, else None."""
+    node = options_node
+    for part in key.split("."):
+        if not isinstance(node, MappingNode):
+            return None
+        m = r.mapping(node, path, None)
+        if part not in m:
+            return None
+        node = m[part][1]
+    return node
+
+
+# Which option of a generator decides a field of a body it makes, by the body's role (the
+# naming conventions above): (kind, role, field) -> option key; role "*" is every other body
+# (the pile's polygons, the pyramid's boxes). A key the scene does not give falls back to the
+# next in the tuple.
+_OPTION_BEHIND = {
+    ("pile", "floor", "vertices"): ("container.width", "container.thickness", "container"),
+    ("pile", "left", "vertices"): ("container.height", "count"),
+    ("pile", "right", "vertices"): ("container.height", "count"),
+    ("pile", "*", "vertices"): ("radius", "sides"),
+    ("pile", "*", "position"): ("container.position", "count"),
+    ("pyramid", "*", "vertices"): ("box",),
+    ("pyramid", "*", "position"): ("base", "rows"),
+    ("pile", "*", "mass"): ("density", "radius"),
+    ("pyramid", "*", "mass"): ("density", "box"),
+    ("pile", "*", "name"): ("name",),
+    ("pyramid", "*", "name"): ("name",),
+}
+
+
+def refusal(
+    r: Reader, field: str, what: str, name: str, kind: str, options_node, path: str, prefix: str
+) -> SceneError:
+    """The SceneError for the checks' refusal `what` of BodySpec `field` of body `name`, made
+    by the `kind` generator of options `options_node` (read at `path`, name prefix `prefix`),
+    at the option behind that field (the options when the scene gives none of them)."""
+    role = name[len(prefix) + 1 :]
+    keys = _OPTION_BEHIND.get((kind, role, field)) or _OPTION_BEHIND.get((kind, "*", field), ())
+    what = f"the body {shown(name)} it makes: {what}"
+    for key in keys:
+        node = option_node(r, options_node, path, key)
+        if node is not None:
+            return r.fail(what, node, join_path(path, key))
+    return r.fail(what, options_node, path)

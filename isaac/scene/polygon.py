@@ -342,12 +342,12 @@ def survey(polygons) -> PolygonFacts:
     return PolygonFacts(problems, extents, largest, areas, second_moments)
 
 
-# `survey`'s results for the vertex tuples it saw last, by the tuple itself (kept here, so its
-# id is not reused): the scene loader gives every box of one size the same tuple (loader._box),
-# so a sweep that reads one scene many times surveys its boxes once. A polygon's results depend
-# on its own vertices alone, and a tuple of tuples of floats cannot change: the same bits. Only
-# the polygons of small calls are remembered (a pile's 100 polygons are new each time: looking
-# them over would cost about 1% of its load, for nothing).
+# `survey`'s results for the vertex tuples it saw last, by the tuple itself (kept here, so its id is
+# not reused): the scene loader gives every box of one size the same tuple (bodies.box_tuple), so a
+# sweep that reads one scene many times surveys its boxes once. A polygon's results depend on its
+# own vertices alone, and a tuple of tuples of floats cannot change: the same bits. Only the
+# polygons of small calls are remembered (a pile's 100 polygons are new each time: looking them over
+# would cost about 1% of its load, for nothing).
 _SURVEYED: dict[int, tuple] = {}
 _SURVEYED_MOST = 256
 _REMEMBER_MOST = 32  # polygons in a call whose results are remembered

@@ -364,6 +364,31 @@ class Reader:
             )
         return node
 
+    def require(self, m: dict, keys, node, path: str) -> None:
+        """Refuse mapping `m` (`node`, read at `path`) if it lacks any of `keys`."""
+        for key in keys:
+            if key not in m:
+                raise self.fail(f"missing key {key!r}", node, path)
+
+    def claim_name(self, seen: dict, what: str, name: str, node, path: str) -> None:
+        """Record `what` (body, joint) name `name`, given at `node` (`path`), in `seen` (name ->
+        (key path, line)); refuse it if `seen` holds it already, naming where it was first."""
+        if name in seen:
+            first_path, first_line = seen[name]
+            raise self.fail(
+                f"duplicate {what} name {shown(name)} (already used by {first_path} at "
+                f"line {first_line})",
+                node,
+                path,
+            )
+        seen[name] = (path, line_of(node))
+
+    def item_alone(self, key: str, text: str, line: int):
+        """The node of list item `text` (`  - ...` lines starting at `line`) under `key:`,
+        composed at its own lines, so its messages name the lines of the whole text."""
+        root = compose("\n" * (line - 2) + f"{key}:\n" + text, self.source)
+        return self.sequence(self.mapping(root, "", (key,))[key][1], key, min_len=1)[0]
+
     # containers
     def mapping(self, node, path: str, allowed) -> dict:
         """{key: (key node, value node)} in document order; refuses duplicates and unknown keys."""
@@ -556,6 +581,15 @@ def optional(reader_fn, m: dict, key: str, path: str, default, *args, **kwargs):
     if key not in m:
         return default
     return reader_fn(m[key][1], join_path(path, key), *args, **kwargs)
+
+
+def key_at(m: dict, node, path: str, *keys: str):
+    """(value node, key path) of the first of `keys` that mapping `m` (`node`, read at `path`)
+    gives, else (`node`, `path`): where a message about what those keys say points."""
+    for key in keys:
+        if key in m:
+            return m[key][1], join_path(path, key)
+    return node, path
 
 
 def scalar_or_none(node):

@@ -1,8 +1,12 @@
-"""World settings and the fidelity presets they come from."""
+"""World settings, the fidelity presets they come from, and their reading from a scene's
+`world:` mapping."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import dataclasses
+
+from isaac.scene.limits import MAX_GRAVITY, MAX_ITERATIONS, MAX_STEPS, MAX_SUBSTEPS
+from isaac.scene.reader import Reader, join_path, optional
 
 # Fidelity presets: each sets the settings below; explicit keys in `world:` override a preset.
 # `seed` reproduces the seed's algorithm exactly (docs/physics.md).
@@ -63,7 +67,7 @@ PRESETS: dict[str, dict[str, object]] = {
 DEFAULT_PRESET = "balanced"
 
 
-@dataclass(frozen=True)
+@dataclasses.dataclass(frozen=True)
 class WorldSettings:
     """Everything about the world a run needs, presets already resolved.
 
@@ -116,3 +120,57 @@ class WorldSettings:
     friction_rule: str = "sqrt"
     ccd: str = "speculative"
     axis_hysteresis: bool = True
+
+
+_WORLD_FIELDS = tuple(f.name for f in dataclasses.fields(WorldSettings))
+_CHOICES = {
+    "integrator": ("explicit", "semi_implicit"),
+    "solver": ("seed", "sequential"),
+    "position_correction": ("full", "partial", "none"),
+    "restitution_rule": ("max", "min", "mean", "product"),
+    "friction_rule": ("sqrt", "min", "max", "mean", "product"),
+    "ccd": ("off", "speculative"),
+}
+
+
+def _world_value(r: Reader, key: str, node, path: str):
+    if key in _CHOICES:
+        return r.choice(node, path, _CHOICES[key])
+    if key in ("warm_starting", "friction", "axis_hysteresis"):
+        return r.boolean(node, path)
+    if key == "gravity":
+        return r.pair(node, path, -MAX_GRAVITY, MAX_GRAVITY)
+    if key == "dt":
+        return r.time(node, path, 0.0, 1.0, lo_open=True)
+    if key == "steps":
+        return r.integer(node, path, 1, MAX_STEPS)
+    if key == "substeps":
+        return r.integer(node, path, 1, MAX_SUBSTEPS)
+    if key in ("iterations", "position_iterations"):
+        return r.integer(node, path, 1, MAX_ITERATIONS)
+    if key == "contact_points":
+        return r.integer(node, path, 1, 2)
+    if key == "slop":
+        return r.number(node, path, 0.0, 1.0)
+    if key == "correction":
+        return r.number(node, path, 0.0, 1.0, lo_open=True)
+    if key == "restitution_threshold":
+        return r.number(node, path, 0.0, 1e3)
+    raise AssertionError(f"world key {key} has no reader")
+
+
+def read_world(r: Reader, node) -> WorldSettings:
+    """The WorldSettings of a scene's `world:` mapping `node` (None when left out)."""
+    if node is None:
+        m = {}
+    else:
+        m = r.mapping(node, "world", _WORLD_FIELDS)
+    fidelity = optional(r.choice, m, "fidelity", "world", DEFAULT_PRESET, tuple(PRESETS))
+    # resolution: dataclass defaults, then the preset, then every explicit key.
+    values = {f.name: f.default for f in dataclasses.fields(WorldSettings)}
+    values.update(PRESETS[fidelity])
+    values["fidelity"] = fidelity
+    for key, (_, value_node) in m.items():
+        if key != "fidelity":
+            values[key] = _world_value(r, key, value_node, join_path("world", key))
+    return WorldSettings(**values)
