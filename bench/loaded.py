@@ -35,6 +35,8 @@ import threading
 import time
 from pathlib import Path
 
+from bench.suite import meta_info, provenance
+
 REPO = Path(__file__).resolve().parents[1]
 BUSY_LOOPS = 2
 REPS = 4  # about 35 s a repetition on the 2-core machine: the whole measurement under 3 minutes
@@ -246,7 +248,8 @@ def markdown(result: dict) -> str:
             parts.append(f"{m['running'][0]}-{m['running'][1]} processes running")
         said.append(f"{condition} {', '.join(parts)}")
     lines = [
-        f"Recording on a loaded machine: `isaac run {result['scene']}` as whole processes, "
+        f"Recording on a loaded machine, {provenance(result['meta'])}: "
+        f"`isaac run {result['scene']}` as whole processes, "
         f"without files, with `--mcap A --rrd B` and with `--mcap A` alone, each file set with "
         f"`--offload` process, thread, none and auto; idle passes alternating with passes "
         f"beside {result['busy_loops']} busy-loop processes started by the bench, "
@@ -294,6 +297,7 @@ def main(argv: list[str] | None = None) -> int:
     t0 = time.perf_counter()
     result = measure(args.scene, args.reps)
     result["elapsed_s"] = time.perf_counter() - t0
+    result["meta"] = meta_info(args.reps, [])
     text = markdown(result)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)

@@ -484,10 +484,18 @@ def fmt(x, digits: int = 3) -> str:
     return str(x)
 
 
+def provenance(meta: dict) -> str:
+    """When, on what and from which commit a result was measured (`meta_info`'s fields): the
+    opening of every results file."""
+    return (
+        f"{meta['date_utc']} on {meta['cpu']} ({meta['cpus']} CPUs, {meta['machine']}), "
+        f"Python {meta['python']}, {meta['versions']}; git {meta['git']}"
+    )
+
+
 def markdown(meta, rows, growth_rows, startup_rows, recs, targets, first_cli=None) -> str:
     lines = [
-        f"Benchmark of {meta['date_utc']} on {meta['machine']} ({meta['cpus']} CPUs), "
-        f"Python {meta['python']}, {meta['versions']}; git {meta['git']}. "
+        f"Benchmark of {provenance(meta)}. "
         f"dt = 1/60 s, no sleeping, friction on (except head-on and tunneling); "
         f"{meta['reps']} repetitions per engine, interleaved, each in its own process; "
         "medians. Ratio = median over repetitions of (engine / pymunk) from the same "
@@ -661,6 +669,31 @@ def update_readme(text: str, path: Path) -> bool:
     return True
 
 
+def cpu_model(cpuinfo: Path = Path("/proc/cpuinfo")) -> str:
+    """The CPU's model name (Linux: /proc/cpuinfo's first `model name`), else what
+    `platform.processor()` says, else "unknown CPU": every result file names the CPU it ran on."""
+    try:
+        for line in cpuinfo.read_text(errors="replace").splitlines():
+            key, _, value = line.partition(":")
+            if key.strip() == "model name" and value.strip():
+                return value.strip()
+    except OSError:
+        pass
+    return platform.processor() or "unknown CPU"
+
+
+def write_results(out: Path, stem: str, objs: list[dict], text: str) -> tuple[Path, Path]:
+    """Write `objs` (the `meta` object first) as OUT/STEM.jsonl, one JSON object a line, and
+    `text` (the tables, opening with the date, CPU and commit) as OUT/STEM.md."""
+    out.mkdir(parents=True, exist_ok=True)
+    jsonl, md = out / f"{stem}.jsonl", out / f"{stem}.md"
+    with open(jsonl, "w") as f:
+        for obj in objs:
+            f.write(json.dumps(obj, default=_json_default) + "\n")
+    md.write_text(text + "\n")
+    return jsonl, md
+
+
 def meta_info(reps: int, skipped: list[str]) -> dict:
     from importlib.metadata import PackageNotFoundError, version
 
@@ -695,7 +728,8 @@ def meta_info(reps: int, skipped: list[str]) -> dict:
     return dict(
         kind="meta",
         date_utc=_dt.datetime.now(_dt.UTC).strftime("%Y-%m-%d %H:%M UTC"),
-        machine=f"{platform.machine()} {platform.processor() or platform.system()}",
+        cpu=cpu_model(),
+        machine=f"{platform.machine()} {platform.system()}",
         cpus=os.cpu_count(),
         python=platform.python_version(),
         versions=", ".join(versions),
@@ -842,22 +876,14 @@ def main(argv: list[str] | None = None) -> int:
         or args.presets != ",".join(DEFAULT_PRESETS)
     )
     stem = "latest" if full else "partial"
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    with open(out / f"{stem}.jsonl", "w") as f:
-        sweep_targets = [t for s in sweeps for t in s.get("targets", [])]
-        objs = [meta, *runs, *rows, *growth_rows, *startup_rows, *recs, *targets]
-        objs += [first_cli] if first_cli is not None else []
-        for obj in [*objs, *sweeps, *sweep_targets]:
-            f.write(json.dumps(obj, default=_json_default) + "\n")
-    (out / f"{stem}.md").write_text(text + "\n")
+    sweep_targets = [t for s in sweeps for t in s.get("targets", [])]
+    objs = [meta, *runs, *rows, *growth_rows, *startup_rows, *recs, *targets]
+    objs += [first_cli] if first_cli is not None else []
+    jsonl, md = write_results(Path(args.out), stem, [*objs, *sweeps, *sweep_targets], text)
     print(text)
     if full and not args.no_readme and update_readme(text, ROOT / "bench" / "README.md"):
         log("bench: bench/README.md table updated")
-    log(
-        f"bench: {meta['elapsed_s']:.0f} s; wrote {out / (stem + '.jsonl')} and "
-        f"{out / (stem + '.md')}"
-    )
+    log(f"bench: {meta['elapsed_s']:.0f} s; wrote {jsonl} and {md}")
     return 0
 
 

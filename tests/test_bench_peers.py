@@ -250,6 +250,8 @@ def test_the_first_isaac_run_is_judged_to_its_first_step_and_reported_with_its_w
     )
     (target,) = check_targets([], [], [], [], (), first)
     assert (target["limit"], target["value"], target["met"]) == (15.0, first_step, met)
-    meta = dict(date_utc="d", machine="m", cpus=2, python="3.11", versions="v", git="g", reps=1)
+    meta = dict(
+        date_utc="d", cpu="c", machine="m", cpus=2, python="3.11", versions="v", git="g", reps=1
+    )
     text = markdown(meta, [], [], [], [], [target], first)
     assert f"first step {first_step:.1f} s after the command started, 17.9 s for the whole" in text
