@@ -34,3 +34,23 @@ def diverging() -> Scene:
         BodySpec("anvil", box, position=(0.0, 0.9)),
     )
     return Scene("diverging", world, bodies)
+
+
+# a blade turning on an axle through its centre, the axle's hub concrete: the blade's centre is
+# inside the hub in every step, and the joint keeps the two from colliding
+ROTOR = """name: rotor
+world: {dt: 0.01, steps: 20}
+bodies:
+  - {name: hub, shape: {box: [0.3, 0.3]}, position: [0.0, 2.0], concrete: true}
+  - {name: blade, shape: {box: [2.0, 0.1]}, position: [0.0, 2.0], angular_velocity: 3.0}
+joints:
+  - {name: axle, type: revolute, bodies: [hub, blade], anchor: [0.0, 2.0]}
+"""
+
+# a box whose mask leaves out the concrete ledge's category: it falls through, by design
+LEDGE = """name: ledge
+world: {dt: 0.01, steps: 60}
+bodies:
+  - {name: ledge, shape: {box: [4.0, 0.2]}, position: [0.0, 0.0], concrete: true, category: 0x2}
+  - {name: ghost, shape: {box: [0.2, 0.2]}, position: [0.0, 1.0], mask: 0x1}
+"""

@@ -322,7 +322,7 @@ def test_every_record_a_simulation_makes_resumes_to_the_same_bits(name):
         assert [state_hash(resumed.step()) for _ in want] == [state_hash(r) for r in want]
 
 
-# ---- counts: one validator (isaac.engine.guards.count) for every call taking one
+# ---- counts: one validator (isaac.engine.counts.count) for every call taking one
 
 
 def _sim():

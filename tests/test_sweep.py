@@ -10,7 +10,6 @@ line and the key. Slow cases: a worker killed mid-sweep, Ctrl-C then resume, no 
 from __future__ import annotations
 
 import hashlib
-import logging
 import os
 import signal
 import subprocess
@@ -22,6 +21,7 @@ from pathlib import Path
 import numpy as np
 import pyarrow.parquet as pq
 import pytest
+from cluster_helpers import local_cluster
 
 from isaac.app.cli import main
 from isaac.app.sweep import SweepError, execute, load_sweep
@@ -61,19 +61,8 @@ def _write(tmp_path: Path, text: str, name: str = "s.sweep.yaml") -> Path:
 @pytest.fixture(scope="module")
 def cluster():
     """One local 2-worker cluster for the module (bound to 127.0.0.1, no dashboard)."""
-    from dask.distributed import Client, LocalCluster
-
-    with LocalCluster(
-        n_workers=2,
-        threads_per_worker=1,
-        processes=True,
-        host="127.0.0.1",
-        dashboard_address=None,
-        scheduler_kwargs={"dashboard": False, "dashboard_address": "127.0.0.1:0"},
-        silence_logs=logging.ERROR,
-    ) as c:
-        with Client(c) as client:
-            yield c, client
+    with local_cluster(2) as both:
+        yield both
 
 
 def _rows_written(rows: Path) -> int:

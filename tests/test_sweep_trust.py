@@ -10,13 +10,14 @@ Small sweeps (2-3 runs, few steps) on one 1-worker local cluster for the module.
 from __future__ import annotations
 
 import json
-import logging
 import os
 import sys
 from pathlib import Path
 
 import pyarrow.parquet as pq
 import pytest
+from cluster_helpers import local_cluster
+from physics_helpers import LEDGE, ROTOR
 
 from isaac.app.cli import main
 from isaac.app.sweep import execute
@@ -41,19 +42,8 @@ record: mcap
 
 @pytest.fixture(scope="module")
 def cluster():
-    from dask.distributed import Client, LocalCluster
-
-    with LocalCluster(
-        n_workers=1,
-        threads_per_worker=1,
-        processes=True,
-        host="127.0.0.1",
-        dashboard_address=None,
-        scheduler_kwargs={"dashboard": False, "dashboard_address": "127.0.0.1:0"},
-        silence_logs=logging.ERROR,
-    ) as c:
-        with Client(c) as client:
-            yield c, client
+    with local_cluster(1) as both:
+        yield both
 
 
 @pytest.fixture(scope="module")
@@ -114,20 +104,18 @@ def test_a_log_replaced_by_another_runs_log_is_a_wrong_log(recorded, cluster, ca
 
 
 def test_the_replays_notes_are_kept_in_detail_and_said(recorded, cluster, capsys, tmp_path):
-    """A log whose recorded settings this version reads differently (here: its slop, rewritten
-    with the table's sha256 updated to match) replays identical with `isaac replay`'s note."""
+    """A log recorded under another Python (here: its python_version rewritten, with the
+    table's sha256 updated to match) replays identical with `isaac replay`'s note."""
     sys.path.insert(0, str(ROOT / "tests" / "replay"))
     from logtools import rewrite
 
     out = recorded(tmp_path / "out")
     log = out / "logs" / "run-000001.mcap"
 
-    def slop(meta):
-        settings = json.loads(meta["settings"])
-        settings["slop"] = 0.5
-        return {**meta, "settings": json.dumps(settings, sort_keys=True)}
+    def python(meta):
+        return {**meta, "python_version": "3.0.1"}
 
-    rewrite(log, tmp_path / "noted.mcap", metadata=slop)
+    rewrite(log, tmp_path / "noted.mcap", metadata=python)
     os.replace(tmp_path / "noted.mcap", log)
     table = pq.read_table(out / "runs.parquet")
     shas = table.column("log_sha256").to_pylist()
@@ -138,28 +126,9 @@ def test_the_replays_notes_are_kept_in_detail_and_said(recorded, cluster, capsys
     assert status == 0
     assert [r["verdict"] for r in rows] == ["identical"] * 3
     assert rows[0]["detail"] is None and rows[2]["detail"] is None
-    assert "recorded settings" in rows[1]["detail"] and "slop (log 0.5" in rows[1]["detail"]
-    assert "note (1 identical log): " in text and "slop (log 0.5" in text
-
-
-# a blade turning on an axle through its centre, the axle's hub concrete: the blade's centre is
-# inside the hub in every step, and the joint keeps the two from colliding
-ROTOR = """name: rotor
-world: {dt: 0.01, steps: 20}
-bodies:
-  - {name: hub, shape: {box: [0.3, 0.3]}, position: [0.0, 2.0], concrete: true}
-  - {name: blade, shape: {box: [2.0, 0.1]}, position: [0.0, 2.0], angular_velocity: 1.0}
-joints:
-  - {name: axle, type: revolute, bodies: [hub, blade], anchor: [0.0, 2.0]}
-"""
-
-# a box whose mask leaves out the concrete ledge's category: it falls through, by design
-LEDGE = """name: ledge
-world: {dt: 0.01, steps: 60}
-bodies:
-  - {name: ledge, shape: {box: [4.0, 0.2]}, position: [0.0, 0.0], concrete: true, category: 0x2}
-  - {name: ghost, shape: {box: [0.2, 0.2]}, position: [0.0, 1.0], mask: 0x1}
-"""
+    assert "versions or platform differ" in rows[1]["detail"]
+    assert "python 3.0.1 in the log" in rows[1]["detail"]
+    assert "note (1 identical log): " in text and "python 3.0.1 in the log" in text
 
 
 def _tunneled(tmp_path: Path, cluster, name: str, scene: str, grid: dict) -> list[tuple]:

@@ -8,7 +8,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-from physics_helpers import box, scene
+from physics_helpers import LEDGE, ROTOR, box, scene
 
 from isaac.app.cli import main
 from isaac.app.tradeoff import (
@@ -440,26 +440,6 @@ def test_the_plots_second_panel_shows_the_joint_error_for_a_scene_with_joints(
          "--png", str(tmp_path / "o.png")]
     )  # fmt: skip
     assert status == 0 and shown == [second]
-
-
-# a blade turning on an axle through its centre, the axle's hub concrete: the blade's centre is
-# inside the hub in every step, and the joint keeps the two from colliding
-ROTOR = """name: rotor
-world: {dt: 0.01, steps: 20}
-bodies:
-  - {name: hub, shape: {box: [0.3, 0.3]}, position: [0.0, 2.0], concrete: true}
-  - {name: blade, shape: {box: [2.0, 0.1]}, position: [0.0, 2.0], angular_velocity: 3.0}
-joints:
-  - {name: axle, type: revolute, bodies: [hub, blade], anchor: [0.0, 2.0]}
-"""
-
-# a box whose mask leaves out the concrete ledge's category: it falls through, by design
-LEDGE = """name: ledge
-world: {dt: 0.01, steps: 60}
-bodies:
-  - {name: ledge, shape: {box: [4.0, 0.2]}, position: [0.0, 0.0], concrete: true, category: 0x2}
-  - {name: ghost, shape: {box: [0.2, 0.2]}, position: [0.0, 1.0], mask: 0x1}
-"""
 
 
 def _checked(text: str):

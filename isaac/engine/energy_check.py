@@ -28,6 +28,8 @@ Numpy only, no compiled code: the batch sums come from `diagnostics.batch_energi
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 # X(s) / S past which a run is flagged (docs/physics.md, Energy check: the largest share a
@@ -48,17 +50,28 @@ def energy_scale(mass, concrete, position, velocity, angular_velocity, inertia, 
     m = np.asarray(mass)[movable]
     v = np.asarray(velocity)[movable]
     w = np.asarray(angular_velocity)[movable]
-    kinetic = float(
-        np.sum(0.5 * m * np.sum(v * v, axis=1) + 0.5 * np.asarray(inertia)[movable] * w * w)
+    each = (
+        0.5 * m * (v[:, 0] * v[:, 0] + v[:, 1] * v[:, 1])
+        + 0.5 * np.asarray(inertia)[movable] * w * w
     )
+    kinetic = _in_order(each)
     if not len(position):
         return kinetic
     r = np.asarray(radius)[:, None]
     lo = np.min(np.asarray(position) - r, axis=0)
     hi = np.max(np.asarray(position) + r, axis=0)
     size = float(np.max(hi - lo))
-    g = float(np.hypot(gravity[0], gravity[1]))
-    return kinetic + g * float(np.sum(m)) * size
+    g = math.sqrt(gravity[0] * gravity[0] + gravity[1] * gravity[1])
+    return kinetic + g * _in_order(m) * size
+
+
+def _in_order(values: np.ndarray) -> float:
+    """The sum of `values` taken left to right: np.sum groups pairwise by the array's length,
+    and the scale decides a flag that must be the same on every machine (determinism)."""
+    total = 0.0
+    for x in values.tolist():
+        total += x
+    return total
 
 
 class EnergyCheck:

@@ -3,7 +3,8 @@ steps, a record to resume from, the state's arrays) is checked here before any o
 compiled code, which trusts its input (a record of 3 bodies resumed into a scene of 2 wrote
 past its arrays' ends).
 
-- `count`: a number of steps or a batch size: an int (numpy integers too, not bool) >= a floor.
+- `count` (from `isaac.engine.counts`, where `StepBatch` takes it too): a number of steps or a
+  batch size: an int (numpy integers too, not bool) >= a floor.
 - `check_state`: the arrays of an `isaac.engine.world.State` (replaced by a caller between
   steps): each of the shape, dtype and layout the kernels were compiled for, and finite.
 - `checked_record`: a `StepRecord` to resume from, against the simulation's model: its step,
@@ -19,6 +20,7 @@ import math
 
 import numpy as np
 
+from isaac.engine.counts import count
 from isaac.engine.joints import JOINT_IMPULSES
 from isaac.engine.records import CONTACT_FIELDS, JOINT_FIELDS, Contacts, JointRows, StepRecord
 from isaac.engine.world import State
@@ -39,24 +41,8 @@ _CONTACT_PAIRS = frozenset(("point", "normal", "push_a", "push_b"))
 _CONTACT_READ = ("impulse", "tangent_impulse")
 _JOINT_WIDTH = {"anchor_a": 2, "anchor_b": 2, "linear_impulse": 2, "error": 2}
 _JOINT_WIDTH["impulses"] = JOINT_IMPULSES
-# the largest count or step index: the kernels count steps in int64 (a step index and the steps
-# still to take added up stay below 2^63)
-LARGEST = 1 << 62
 # a contact's feature id, ((side * 64 + edge) * 64 + edge): below 2 * 64 * 64
 FEATURES = 2 * 64 * 64
-
-
-def count(value, what: str, *, minimum: int = 0) -> int:
-    """`value` as an int in minimum .. LARGEST: a Python or numpy integer (not a bool);
-    TypeError for anything else (1.5, "3", None), ValueError outside the range. `what` names
-    it in the message ("steps")."""
-    if type(value) is int and minimum <= value <= LARGEST:  # the common case, first
-        return value
-    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)):
-        raise TypeError(f"{what} must be an int >= {minimum}, got {value!r}")
-    if not minimum <= value <= LARGEST:
-        raise ValueError(f"{what} must be an int from {minimum} to 2^62, got {value}")
-    return int(value)
 
 
 def check_state(state, names: tuple[str, ...]) -> None:

@@ -24,6 +24,8 @@ from functools import cached_property
 
 import numpy as np
 
+from isaac.engine.counts import count
+
 CONTACT_FIELDS = (
     "substep",
     "a",
@@ -253,8 +255,6 @@ class StepBatch:
         step's index)."""
         if type(s) is int and 0 <= s < self.steps:  # the common case, first
             return s
-        from isaac.engine.guards import count  # (guards imports this module)
-
         s = count(s, "a batch's place")
         if s >= self.steps:
             raise ValueError(f"place {s} is past the batch's last (it holds {self.steps} steps)")

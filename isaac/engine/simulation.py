@@ -8,8 +8,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from isaac.engine import compile_ahead as _ahead
+from isaac.engine.counts import count
 from isaac.engine.driver import STAGES, Stepper
-from isaac.engine.guards import check_state, checked_record, count
+from isaac.engine.guards import check_state, checked_record
 from isaac.engine.integrate import DIVERGED_ANGLE, DIVERGED_POSITION, DIVERGED_SPEED, diverged_body
 from isaac.engine.joints import JOINT_IMPULSES
 from isaac.engine.records import (
@@ -321,7 +322,7 @@ class Simulation:
         compiled call). Eager, unlike `run`: the steps are taken before it returns.
         `record()` afterwards gives the last state and its step's contacts. Raises
         SimulationError like `step()`, with the state left before the failing step.
-        steps: an int >= 0 (`isaac.engine.guards.count`: TypeError or ValueError else)."""
+        steps: an int >= 0 (`isaac.engine.counts.count`: TypeError or ValueError else)."""
         steps = count(steps, "steps")
         while steps > 0 and not self._driver_ready():
             self._staged_step()
@@ -381,7 +382,7 @@ class Simulation:
         yield each batch of their records (`StepBatch`: read-only arrays, one compiled call
         per batch). A diverging step ends the run with SimulationError after the batch of
         the steps before it was yielded. steps: an int >= 0, size: an int >= 1, checked at
-        the call (`isaac.engine.guards.count`: TypeError or ValueError else); the steps are
+        the call (`isaac.engine.counts.count`: TypeError or ValueError else); the steps are
         taken as the generator is iterated."""
         return self._batches(*self._counts(steps, size, "size"))
 
@@ -442,7 +443,7 @@ class Simulation:
         one step at a time; `resume(record)` goes back to any record, bit for bit.
 
         steps: an int >= 0, batch: an int >= 1, checked at the call, before iteration
-        (`isaac.engine.guards.count`: TypeError or ValueError else)."""
+        (`isaac.engine.counts.count`: TypeError or ValueError else)."""
         return self._records(self._batches(*self._counts(steps, batch, "batch")))
 
     @staticmethod
