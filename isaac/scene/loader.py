@@ -15,7 +15,7 @@ import stat
 from pathlib import Path
 
 from isaac.errors import SceneError
-from isaac.scene import checks, fast_reader, generators, polygon
+from isaac.scene import checks, fast_reader, generators, polygon, validate
 from isaac.scene.limits import (
     FILTER_BITS,
     MAX_ANCHOR,
@@ -24,9 +24,7 @@ from isaac.scene.limits import (
     MAX_DAMPING_RATIO,
     MAX_DENSITY,
     MAX_FRICTION,
-    MAX_GRAVITY,
     MAX_GROUP,
-    MAX_ITERATIONS,
     MAX_JOINT_LENGTH,
     MAX_JOINTS,
     MAX_MOTOR_FORCE,
@@ -38,9 +36,7 @@ from isaac.scene.limits import (
     MAX_SCENE_BYTES,
     MAX_SIZE,
     MAX_SPEED,
-    MAX_STEPS,
     MAX_STIFFNESS,
-    MAX_SUBSTEPS,
     MAX_TIME,
     MAX_VERTICES,
     MAX_YAML_BYTES,
@@ -74,40 +70,19 @@ from isaac.trig import sin_cos
 # --- world ----------------------------------------------------------------------------------
 
 _WORLD_FIELDS = tuple(f.name for f in dataclasses.fields(WorldSettings))
-_CHOICES = {
-    "integrator": ("explicit", "semi_implicit"),
-    "solver": ("seed", "sequential"),
-    "position_correction": ("full", "partial", "none"),
-    "restitution_rule": ("max", "min", "mean", "product"),
-    "friction_rule": ("sqrt", "min", "max", "mean", "product"),
-    "ccd": ("off", "speculative"),
-}
 
 
 def _world_value(r: Reader, key: str, node, path: str):
-    if key in _CHOICES:
-        return r.choice(node, path, _CHOICES[key])
-    if key in ("warm_starting", "friction", "axis_hysteresis"):
+    # the rules are checks.WORLD_*, which also check WorldSettings made in Python
+    if key in checks.WORLD_CHOICES:
+        return r.choice(node, path, checks.WORLD_CHOICES[key])
+    if key in checks.WORLD_BOOLEANS:
         return r.boolean(node, path)
-    if key == "gravity":
-        return r.pair(node, path, -MAX_GRAVITY, MAX_GRAVITY)
-    if key == "dt":
-        return r.time(node, path, 0.0, 1.0, lo_open=True)
-    if key == "steps":
-        return r.integer(node, path, 1, MAX_STEPS)
-    if key == "substeps":
-        return r.integer(node, path, 1, MAX_SUBSTEPS)
-    if key in ("iterations", "position_iterations"):
-        return r.integer(node, path, 1, MAX_ITERATIONS)
-    if key == "contact_points":
-        return r.integer(node, path, 1, 2)
-    if key == "slop":
-        return r.number(node, path, 0.0, 1.0)
-    if key == "correction":
-        return r.number(node, path, 0.0, 1.0, lo_open=True)
-    if key == "restitution_threshold":
-        return r.number(node, path, 0.0, 1e3)
-    raise AssertionError(f"world key {key} has no reader")
+    kind, lo, hi, lo_open = checks.WORLD_RANGES[key]
+    read = {"pair": r.pair, "time": r.time, "number": r.number}
+    if kind == "integer":
+        return r.integer(node, path, lo, hi)
+    return read[kind](node, path, lo, hi, lo_open=lo_open)
 
 
 def _read_world(r: Reader, node) -> WorldSettings:
@@ -848,7 +823,7 @@ def load_scene_text(text: str, source: str = "<text>", *, default_name: str | No
             text, source, default_name or "scene", _read_head, _body_alone, _joint_alone
         )
         if scene is not None:
-            return scene
+            return validate.remember(scene)
         if len(text) > MAX_YAML_BYTES:
             raise SceneError(
                 f"the text is longer than {MAX_YAML_BYTES} characters (the limit for YAML not "
@@ -880,7 +855,7 @@ def read_scene_tree(root, source: str = "<text>", *, default_name: str | None = 
     collecting = gc.isenabled()
     gc.disable()  # as in load_scene_text: the readers' many small objects
     try:
-        return _read_scene(Reader(source), root, default_name or "scene")
+        return validate.remember(_read_scene(Reader(source), root, default_name or "scene"))
     except RecursionError:
         raise SceneError("the document is nested too deeply", source=source) from None
     finally:
