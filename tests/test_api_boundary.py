@@ -17,7 +17,7 @@ import sys
 
 import numpy as np
 import pytest
-from api_hostile import ROOT, in_child, record_of, scene, scene_text
+from api_hostile import HOSTILE_SCENES, ROOT, built, in_child, record_of, scene, scene_text
 
 from isaac.engine.records import StepRecord, state_hash
 from isaac.engine.simulation import Simulation
@@ -432,3 +432,57 @@ def test_the_cli_refuses_a_negative_or_fractional_step_option_in_one_line(tmp_pa
     # a run of no steps is still one (its batches of 0 and max(0 - 1, 0) steps)
     none = subprocess.run([*isaac, "run", str(tmp_path / "s.yaml"), "--steps", "0"], cwd=ROOT)
     assert none.returncode == 0
+
+
+# --- scenes built in Python -------------------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def hostile_scene_outcomes() -> dict:
+    """Every HOSTILE_SCENES case's outcome, from one child process (as `hostile_outcomes`)."""
+    child = in_child(f"import api_hostile as h; h.run_scene_cases({list(HOSTILE_SCENES)!r})")
+    outcomes = {"child": child}
+    for line in child.stdout.splitlines():
+        got = json.loads(line)
+        outcomes[got["case"], got["staged"]] = got
+    return outcomes
+
+
+@pytest.mark.parametrize("staged", [False, True], ids=["driver", "staged"])
+@pytest.mark.parametrize("name", list(HOSTILE_SCENES))
+def test_a_scene_built_in_python_that_the_loader_would_refuse_is_refused_naming_its_field(
+    hostile_scene_outcomes, name, staged
+):
+    child = hostile_scene_outcomes["child"]
+    got = hostile_scene_outcomes.get((name, staged))
+    assert got is not None, (
+        f"the child died (exit status {child.returncode}) before reporting {name!r}:\n"
+        + "\n".join(child.stderr.splitlines()[-15:])
+    )
+    assert got["raised"] == "SceneError", got
+    assert HOSTILE_SCENES[name][1] in got["message"], got["message"]
+    assert "\n" not in got["message"]
+
+
+def test_a_scene_built_in_python_that_the_loader_would_take_runs_as_the_loaded_one():
+    from isaac.scene import load_scene_text, scene_to_yaml
+
+    mine = built()
+    loaded = load_scene_text(scene_to_yaml(mine))
+    a, b = Simulation(mine), Simulation(loaded)
+    for _ in range(5):
+        ra, rb = a.step(), b.step()
+    assert state_hash(ra) == state_hash(rb)
+
+
+def test_what_is_not_a_scene_is_a_type_error():
+    with pytest.raises(TypeError, match="runs an isaac.scene.Scene, got str"):
+        Simulation("scenes/bounce.yaml")
+
+
+def test_every_shipped_scene_passes_the_python_check_as_it_loads():
+    from isaac.scene.validate import check_scene
+
+    for path in sorted((ROOT / "scenes").glob("*.yaml")):
+        if not path.name.endswith(".sweep.yaml"):
+            check_scene(load_scene(path))  # the full check, not the loader's remembered pass

@@ -18,7 +18,8 @@ import numpy as np
 
 from isaac.collision_filter import colliders
 from isaac.engine.joints import Joints, in_waves, joint_table
-from isaac.scene import Scene, checks, circle, polygon
+from isaac.scene import Scene, circle, polygon
+from isaac.scene.validate import checked
 
 
 @dataclass(frozen=True, eq=False)
@@ -130,7 +131,10 @@ def wrap_angle(angle: float) -> float:
 
 
 def build_model(scene: Scene) -> Model:
-    """Mass properties and padded geometry of every body of a validated scene."""
+    """Mass properties and padded geometry of every body of `scene`, checked first as the
+    loader checks a scene file (`isaac.scene.validate.checked`: TypeError or SceneError),
+    since a scene built in Python never passed the loader and the kernels trust the model."""
+    checked(scene)
     n = len(scene.bodies)
     width = max((len(b.vertices) for b in scene.bodies), default=3)
     width = max(width, 1)  # a scene of circles only
@@ -182,9 +186,6 @@ def build_model(scene: Scene) -> Model:
     leaves_at = np.array(
         [np.inf if b.leaves_at is None else b.leaves_at for b in scene.bodies], dtype=np.float64
     )
-    refusal = checks.joint_solver_problem(scene.world.solver, scene.joints)
-    if refusal is not None:  # a scene built in Python (the loader refuses it at its key)
-        raise ValueError(refusal)
     joints, no_collide = joint_table(scene.joints, n)
     category = np.array([b.category for b in scene.bodies], dtype=np.int64)
     mask = np.array([b.mask for b in scene.bodies], dtype=np.int64)

@@ -41,6 +41,7 @@ from isaac.scene.limits import (
     MAX_MOTOR_FORCE,
     MAX_MOTOR_TORQUE,
     MAX_NAME_LENGTH,
+    MAX_QUOTED,
     MAX_REFERENCE_ANGLE,
     MAX_SIZE,
     MAX_SPEED,
@@ -49,6 +50,12 @@ from isaac.scene.limits import (
     MIN_SIZE,
 )
 from isaac.scene.reader import shown, valid_name
+from isaac.scene.settings import (
+    WORLD_BOOLEANS,
+    WORLD_CHOICES,
+    WORLD_RANGES,
+    WorldSettings,
+)
 from isaac.scene.spec import JOINT_KINDS, BodySpec, JointSpec
 from isaac.trig import sin_cos
 
@@ -211,6 +218,10 @@ def _why(body: BodySpec, facts: polygon.PolygonFacts, i: int, props: MassPropert
     if facts.problems[i] is not None:
         return "vertices", facts.problems[i]
     extent = float(facts.extents[i])
+    if body.circle is not None and not MIN_SIZE <= extent <= MAX_SIZE:
+        return "circle", (
+            f"the circle's radius {body.circle!r} m is outside [{MIN_SIZE / 2!r}, {MAX_SIZE / 2!r}]"
+        )
     if not MIN_SIZE <= extent <= MAX_SIZE:
         return "vertices", (
             f"the polygon's extent {extent!r} m is outside [{MIN_SIZE!r}, {MAX_SIZE!r}]"
@@ -244,6 +255,47 @@ def _why(body: BodySpec, facts: polygon.PolygonFacts, i: int, props: MassPropert
         f"inertia {inertia!r} kg m^2 (second moment {second!r} m^4 x density) and their "
         "inverses must be finite normal numbers; change the density or the size"
     )
+
+
+# --- world settings -------------------------------------------------------------------------
+
+
+def world_problem(world) -> tuple[str, str] | None:
+    """(WorldSettings field, one line) of the first setting of `world` outside the rules of
+    `world:` (WORLD_CHOICES, WORLD_BOOLEANS, WORLD_RANGES), or None. Numbers are Python ints or
+    floats (not bool); an integer setting a whole number (an int)."""
+    if not isinstance(world, WorldSettings):
+        return "world", f"must be an isaac.scene.WorldSettings, got {type(world).__name__}"
+    for field, options in WORLD_CHOICES.items():
+        value = getattr(world, field)
+        if not isinstance(value, str) or value not in options:
+            return field, f"{field} {_shown_value(value)} is not one of {', '.join(options)}"
+    for field in WORLD_BOOLEANS:
+        value = getattr(world, field)
+        if not isinstance(value, bool):
+            return field, f"{field} must be True or False, got {_shown_value(value)}"
+    for field, (kind, lo, hi, lo_open) in WORLD_RANGES.items():
+        value = getattr(world, field)
+        low = f"> {lo!r}" if lo_open else f">= {lo!r}"
+        if kind == "pair":
+            ok = isinstance(value, (tuple, list)) and len(value) == 2
+            ok = ok and all(_real(v, lo, hi, lo_open) for v in value)
+            what = f"two numbers, each {low} and <= {hi!r}"
+        elif kind == "integer":
+            ok = type(value) is int and lo <= value <= hi
+            what = f"a whole number (int) in {lo}..{hi}"
+        else:
+            ok = _real(value, lo, hi, lo_open)
+            what = f"a number {low} and <= {hi!r}"
+        if not ok:
+            return field, f"{field} must be {what}, got {_shown_value(value)}"
+    return None
+
+
+def _shown_value(value) -> str:
+    """`value`'s repr for a message, cut to MAX_QUOTED characters."""
+    text = repr(value)
+    return text if len(text) <= MAX_QUOTED else f"{text[:MAX_QUOTED]}... ({len(text)} characters)"
 
 
 # --- joints ---------------------------------------------------------------------------------

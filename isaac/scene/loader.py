@@ -15,7 +15,7 @@ import stat
 from pathlib import Path
 
 from isaac.errors import SceneError
-from isaac.scene import bodies, checks, fast_reader, generators, joints
+from isaac.scene import bodies, checks, fast_reader, generators, joints, validate
 from isaac.scene.limits import MAX_BODIES, MAX_SCENE_BYTES, MAX_YAML_BYTES
 from isaac.scene.reader import (
     MappingNode,
@@ -103,7 +103,7 @@ def load_scene_text(text: str, source: str = "<text>", *, default_name: str | No
             text, source, default_name or "scene", read_head, bodies.body_alone, joints.joint_alone
         )
         if scene is not None:
-            return scene
+            return validate.remember(scene)
         if len(text) > MAX_YAML_BYTES:
             raise SceneError(
                 f"the text is longer than {MAX_YAML_BYTES} characters (the limit for YAML not "
@@ -128,7 +128,7 @@ def read_scene_tree(root, source: str = "<text>", *, default_name: str | None = 
     whole text again each time. Raises SceneError like `load_scene_text`; its lines are the
     nodes' own."""
     with _reading(source):
-        return _read_scene(Reader(source), root, default_name or "scene")
+        return validate.remember(_read_scene(Reader(source), root, default_name or "scene"))
 
 
 @contextlib.contextmanager

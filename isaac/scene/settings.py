@@ -123,7 +123,10 @@ class WorldSettings:
 
 
 _WORLD_FIELDS = tuple(f.name for f in dataclasses.fields(WorldSettings))
-_CHOICES = {
+# The rules of `world:` (docs/scene-format.md), read from YAML by `read_world` and checked by
+# `checks.world_problem` on WorldSettings however they were made.
+WORLD_CHOICES = {
+    "fidelity": tuple(PRESETS),
     "integrator": ("explicit", "semi_implicit"),
     "solver": ("seed", "sequential"),
     "position_correction": ("full", "partial", "none"),
@@ -131,32 +134,33 @@ _CHOICES = {
     "friction_rule": ("sqrt", "min", "max", "mean", "product"),
     "ccd": ("off", "speculative"),
 }
+WORLD_BOOLEANS = ("warm_starting", "friction", "axis_hysteresis")
+# key: (kind, lowest, highest, lowest excluded); kind "pair" (two numbers), "time" (a number,
+# or a fraction in YAML), "integer" or "number"
+WORLD_RANGES = {
+    "gravity": ("pair", -MAX_GRAVITY, MAX_GRAVITY, False),
+    "dt": ("time", 0.0, 1.0, True),
+    "steps": ("integer", 1, MAX_STEPS, False),
+    "substeps": ("integer", 1, MAX_SUBSTEPS, False),
+    "iterations": ("integer", 1, MAX_ITERATIONS, False),
+    "position_iterations": ("integer", 1, MAX_ITERATIONS, False),
+    "contact_points": ("integer", 1, 2, False),
+    "slop": ("number", 0.0, 1.0, False),
+    "correction": ("number", 0.0, 1.0, True),
+    "restitution_threshold": ("number", 0.0, 1e3, False),
+}
 
 
 def _world_value(r: Reader, key: str, node, path: str):
-    if key in _CHOICES:
-        return r.choice(node, path, _CHOICES[key])
-    if key in ("warm_starting", "friction", "axis_hysteresis"):
+    if key in WORLD_CHOICES:
+        return r.choice(node, path, WORLD_CHOICES[key])
+    if key in WORLD_BOOLEANS:
         return r.boolean(node, path)
-    if key == "gravity":
-        return r.pair(node, path, -MAX_GRAVITY, MAX_GRAVITY)
-    if key == "dt":
-        return r.time(node, path, 0.0, 1.0, lo_open=True)
-    if key == "steps":
-        return r.integer(node, path, 1, MAX_STEPS)
-    if key == "substeps":
-        return r.integer(node, path, 1, MAX_SUBSTEPS)
-    if key in ("iterations", "position_iterations"):
-        return r.integer(node, path, 1, MAX_ITERATIONS)
-    if key == "contact_points":
-        return r.integer(node, path, 1, 2)
-    if key == "slop":
-        return r.number(node, path, 0.0, 1.0)
-    if key == "correction":
-        return r.number(node, path, 0.0, 1.0, lo_open=True)
-    if key == "restitution_threshold":
-        return r.number(node, path, 0.0, 1e3)
-    raise AssertionError(f"world key {key} has no reader")
+    kind, lo, hi, lo_open = WORLD_RANGES[key]
+    if kind == "integer":
+        return r.integer(node, path, lo, hi)
+    read = {"pair": r.pair, "time": r.time, "number": r.number}
+    return read[kind](node, path, lo, hi, lo_open=lo_open)
 
 
 def read_world(r: Reader, node) -> WorldSettings:
