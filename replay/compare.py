@@ -31,7 +31,7 @@ import numpy as np
 
 from isaac.engine import PHYSICS_VERSION
 from isaac.engine.records import StepRecord
-from isaac.errors import LogError, SimulationError
+from isaac.errors import LogError, SimulationError, StateError
 from isaac.scene import Scene
 from recorder import schema as S
 from recorder.mcap_writer import (
@@ -356,6 +356,28 @@ class StepEncoder:
         }
 
 
+def _resume(sim, replayed: ReplayedSteps, logged: StepRecord) -> str | None:
+    """Go on from a logged state; why the engine refuses it (`isaac.engine.guards`: a value
+    that is not finite, ...) instead of raising, or None once it has taken it."""
+    try:
+        sim.resume(logged)
+    except StateError as exc:
+        return str(exc)
+    replayed.restart(logged.exists)
+    return None
+
+
+def _went_on(sim, replayed: ReplayedSteps, logged: StepRecord, report: Report) -> bool:
+    """Restart from the logged state after a difference at its step; True (lost) when the
+    engine refuses that state, which is then reported at its step as the replay's error."""
+    why = _resume(sim, replayed, logged)
+    if why is None:
+        return False
+    detail = f"the replay cannot go on from the logged state: {why}"
+    report.add([Divergence(logged.step, "simulation", "error", detail=detail)])
+    return True
+
+
 def replay_log(
     path: str,
     *,
@@ -426,6 +448,7 @@ def replay_log(
     timed_steps = 0
     last_step: int | None = None
     go_on = all_steps or tolerance is not None
+    lost = False  # the last logged state was refused: steps are skipped until one is taken
     # read ahead in a thread while the engine steps (replay.reader.Prefetch)
     steps = Prefetch(
         log.steps(start=from_step or 0, stop=to_step),
@@ -447,10 +470,17 @@ def replay_log(
                     report.notes.append(
                         f"the log starts at step {raw.step}: replayed from its state"
                     )
-                keyframe = _logged_record(raw, path, len(names))
-                sim.resume(keyframe)
-                replayed.restart(keyframe.exists)
+                why = _resume(sim, replayed, _logged_record(raw, path, len(names)))
+                if why is not None:
+                    raise LogError(
+                        f"{path}: the log's step {raw.step} cannot be replayed from: {why}"
+                    )
                 report.first_step = raw.step + 1
+                continue
+            if lost:
+                # determinism: a state the engine refused is never stepped; the next logged
+                # state the engine takes is a new start, compared from the step after it
+                lost = _resume(sim, replayed, _logged_record(raw, path, len(names))) is not None
                 continue
             if report.first_step is None:
                 report.first_step = raw.step
@@ -472,8 +502,7 @@ def replay_log(
                 if not go_on:
                     report.stopped_early = True
                     break
-                sim.resume(_logged_record(raw, path, len(names)))
-                replayed.restart(sim.state.exists)
+                lost = _went_on(sim, replayed, _logged_record(raw, path, len(names)), report)
                 continue
             if timed_from is None and replayed.batches:
                 # the first batch also loads the kernels: the rate is measured after it
@@ -493,9 +522,7 @@ def replay_log(
                 report.stopped_early = True
                 break
             # restart from the logged state so the next step is checked on its own
-            logged = _logged_record(raw, path, len(names))
-            sim.resume(logged)
-            replayed.restart(logged.exists)
+            lost = _went_on(sim, replayed, _logged_record(raw, path, len(names)), report)
     finally:
         steps.close()
     finished = time.perf_counter()

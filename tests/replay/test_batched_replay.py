@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from isaac.engine.simulation import Simulation
-from isaac.errors import SimulationError
+from isaac.errors import LogError, SimulationError
 from recorder.mcap_writer import encode_world, joint_table_rows
 from replay import replayed
 from replay.compare import StepEncoder, replay_log
@@ -167,3 +167,41 @@ def test_a_step_that_fails_inside_a_batch_fails_after_every_step_before_it_was_g
     ahead = ReplayedSteps(Simulation(scene), encoder, joints, batched=True)
     for s in range(failing - 1):
         assert ahead.payloads(s) == expected[s]
+
+
+@pytest.mark.parametrize("all_steps", [False, True])
+def test_a_logged_state_the_engine_refuses_is_reported_and_the_replay_goes_on_after_it(
+    stack_log, tmp_path, all_steps
+):
+    # the logged velocity at step k is NaN: the step differs, and the engine cannot go on from
+    # it (isaac.engine.guards refuses a state that is not finite); with --all the replay takes
+    # the logged step k + 1 as a new start and compares every step after it
+    k = 30
+
+    def nan(arrays):
+        arrays["velocity"][2] = np.nan
+
+    bad = tmp_path / "bad.mcap"
+    bodies_changed(stack_log, bad, {k}, nan)
+    got = replay_log(str(bad), all_steps=all_steps)
+    assert got.divergent_steps()[0] == k
+    if not all_steps:
+        assert got.stopped_early
+        return
+    failed = [d for d in got.divergences if d.channel == "simulation"]
+    assert [d.step for d in failed] == [k]
+    assert "cannot go on from the logged state" in failed[0].detail
+    assert "not finite" in failed[0].detail or "nan" in failed[0].detail.lower()
+    assert set(got.divergent_steps()) == {k} and got.steps_compared == 120
+
+
+def test_a_replay_asked_to_start_from_a_refused_logged_state_says_so_in_one_line(
+    stack_log, tmp_path
+):
+    def nan(arrays):
+        arrays["velocity"][2] = np.nan
+
+    bad = tmp_path / "bad.mcap"
+    bodies_changed(stack_log, bad, {30}, nan)
+    with pytest.raises(LogError, match="step 30 cannot be replayed from: .*"):
+        replay_log(str(bad), from_step=30)
