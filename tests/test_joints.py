@@ -13,6 +13,7 @@ import pytest
 
 from isaac.engine.records import state_hash
 from isaac.engine.simulation import Simulation
+from isaac.errors import SceneError
 from isaac.scene import PRESETS, BodySpec, Scene, WorldSettings
 from isaac.scene.polygon import box_vertices
 from isaac.scene.spec import JointSpec
@@ -235,7 +236,8 @@ def test_a_distance_spring_oscillates_at_its_frequency():
 
 def test_a_rope_only_pulls_at_its_length():
     bob = BodySpec(name="bob", vertices=(), circle=0.1, position=(0.0, -0.5))
-    joint = _joint("distance", 0, 1, max_length=1.0)
+    # length: the anchors' distance at step 0, as the loader sets it when none is given
+    joint = _joint("distance", 0, 1, length=0.5, max_length=1.0)
     sim = Simulation(_scene([PIN, bob], [joint]))
     ys = [r.position[1, 1] for r in sim.run(240 * 2)]
     assert ys[10] < -0.5  # slack: it falls freely at first
@@ -261,7 +263,7 @@ def test_connected_bodies_collide_only_when_asked(collide):
 def test_joints_under_the_seed_solver_are_refused():
     scene = _pendulum()
     seed = Scene(name="s", world=_world("seed"), bodies=scene.bodies, joints=scene.joints)
-    with pytest.raises(ValueError, match="sequential solver"):
+    with pytest.raises(SceneError, match="sequential solver"):
         Simulation(seed)
 
 
