@@ -6,7 +6,6 @@ from physics_helpers import box, scene
 
 from isaac.engine.simulation import Simulation
 
-
 DT = 0.01  # s
 
 
