@@ -54,6 +54,7 @@ from mcap.records import (
 )
 
 from isaac.errors import LogError
+from isaac.sizes import byte_size
 
 MAGIC = b"\x89MCAP0\r\n"
 
@@ -108,13 +109,6 @@ class RecordError(Exception):
         self.offset = offset
         self.what = what
         super().__init__(f"{what} (at byte {offset})")
-
-
-def _size(n: int) -> str:
-    for unit, shift in (("GiB", 30), ("MiB", 20), ("KiB", 10)):
-        if n >= 1 << shift:
-            return f"{n / (1 << shift):.3g} {unit}"
-    return f"{n} bytes"
 
 
 def check_regular(path: str) -> None:
@@ -206,8 +200,8 @@ def chunk_data(chunk: ChunkHead):
     if n > MAX_RECORD_BYTES:
         raise RecordError(
             at,
-            f"a chunk claims {_size(n)} uncompressed, more than the {_size(MAX_RECORD_BYTES)} "
-            f"a chunk may hold",
+            f"a chunk claims {byte_size(n)} uncompressed, more than the "
+            f"{byte_size(MAX_RECORD_BYTES)} a chunk may hold",
         )
     kind = chunk.compression
     try:
@@ -222,7 +216,7 @@ def chunk_data(chunk: ChunkHead):
         elif kind == "zstd":
             import zstandard
 
-            declared = zstandard.frame_content_size(chunk.data)
+            declared = zstandard.frame_contentbyte_size(chunk.data)
             if declared > n:
                 raise RecordError(at, f"a zstd chunk's frame claims {declared} bytes, not {n}")
             data = zstandard.ZstdDecompressor().decompress(chunk.data, max_output_size=max(n, 1))
@@ -231,7 +225,8 @@ def chunk_data(chunk: ChunkHead):
     except RecordError:
         raise
     except MemoryError:
-        raise RecordError(at, f"not enough memory to decompress a chunk of {_size(n)}") from None
+        what = f"not enough memory to decompress a chunk of {byte_size(n)}"
+        raise RecordError(at, what) from None
     except Exception as exc:  # noqa: BLE001 - lz4 and zstandard raise their own error types
         raise RecordError(at, f"a chunk that does not decompress ({type(exc).__name__})") from None
     if len(data) != n:
@@ -324,19 +319,19 @@ class McapScan:
             if length > left:
                 raise RecordError(
                     pos,
-                    f"a record that claims {_size(length)}, more than the {_size(max(left, 0))} "
-                    f"left in the file (cut short or corrupt)",
+                    f"a record that claims {byte_size(length)}, more than the "
+                    f"{byte_size(max(left, 0))} left in the file (cut short or corrupt)",
                 )
             if length > MAX_RECORD_BYTES:
                 raise RecordError(
                     pos,
-                    f"a record that claims {_size(length)}, more than the "
-                    f"{_size(MAX_RECORD_BYTES)} a record may hold",
+                    f"a record that claims {byte_size(length)}, more than the "
+                    f"{byte_size(MAX_RECORD_BYTES)} a record may hold",
                 )
             try:
                 body = f.read(length)
             except MemoryError:
-                raise RecordError(pos, f"not enough memory to read {_size(length)}") from None
+                raise RecordError(pos, f"not enough memory to read {byte_size(length)}") from None
             if len(body) != length:
                 raise RecordError(pos, "the file ends inside a record (cut short)")
             self.position = pos + 9 + length

@@ -7,7 +7,7 @@ import re
 import subprocess
 import sys
 
-UNITS = {"B": 1, "kB": 1e3, "MB": 1e6, "GB": 1e9}
+UNITS = {"bytes": 1, "KiB": 2**10, "MiB": 2**20, "GiB": 2**30}
 
 
 def test_a_recorded_run_first_says_how_large_its_log_will_be(tmp_path):

@@ -11,6 +11,7 @@ from itertools import chain
 
 from isaac.app.options import integer
 from isaac.errors import LogError, SimulationError
+from isaac.sizes import byte_size
 
 
 def _steps(text: str) -> int:
@@ -193,7 +194,7 @@ def _plan_recording(args: argparse.Namespace, claims: dict, scene, steps: int) -
         share = COMPRESSED_SHARE.get(args.compression)
         packed = f"; {args.compression} measured {share[0]:g}-{share[1]:g} of that" if share else ""
         print(
-            f"expected MCAP log size: about {_size(total)} ({_size(per_step)} a step x "
+            f"expected MCAP log size: about {byte_size(total)} ({byte_size(per_step)} a step x "
             f"{steps + 1} steps, uncompressed{packed}; contacts estimated at "
             f"{ROWS_PER_MOVING:g} points per moving body)",
             file=sys.stderr,
@@ -573,14 +574,6 @@ def simple_log_bound(n_bodies: int, steps: int) -> int:
 # compressed size / uncompressed size of the log, measured on scenes/default.yaml and
 # scenes/pile.yaml (log format 2, docs/log-format.md): what the expected size says beside it
 COMPRESSED_SHARE = {"lz4": (0.68, 0.82), "zstd": (0.61, 0.71)}
-
-
-def _size(n: float) -> str:
-    """A byte count as a person reads it (kB, MB, GB: powers of 1000)."""
-    for unit, scale in (("GB", 1e9), ("MB", 1e6), ("kB", 1e3)):
-        if n >= scale:
-            return f"{n / scale:.3g} {unit}"
-    return f"{int(n)} B"
 
 
 def batch_size(n_bodies: int) -> int:
