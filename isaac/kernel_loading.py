@@ -9,12 +9,8 @@ references import their own modules (`numba.core.environment._rebuild_env`). Com
 need it, and numba's compiler refreshes the target itself before every compile
 (`numba.core.compiler.CompilerBase`), so a cache miss after lazy loads compiles as before.
 
-Measured (cProfile, 2-core machine, warm cache): the refresh was 0.25-0.33 s of the 0.47 s
-that pyramid-10's first `Simulation.step()` took (11 kernels loaded), and 0.16-0.19 s of
-building its `Simulation`. With the collector paused while a kernel loads (below), the bench's
-whole-process start-up to that first step took 0.77-0.81 of its CPU time before (interleaved
-pairs, bench/README.md). The kernels and their bits are numba's own: only the moment of the
-refresh moves (tests/test_kernel_loading.py).
+The kernels and their bits are numba's own: only the moment of the refresh moves
+(tests/test_kernel_loading.py). What it saves on a cached start-up: docs/speed.md.
 
 Two more things a cached load does that a run does not need, skipped the same way:
 
@@ -30,15 +26,11 @@ Two more things a cached load does that a run does not need, skipped the same wa
   object mode never reads those globals; numba's compiler imports the modules itself when it
   refreshes its target.
 
-Measured with the three (cProfile / process CPU time, 2-core machine under load 5-6, the default
-scene's first batch: 3 kernels loaded): the bitcode parse 48-79 ms, the symbol listing 7-9 ms,
-the environments' imports 34-39 ms of the 0.65-0.68 s of CPU to the first step.
-
 `install()` replaces `numba.core.caching.Cache.load_overload` (numba 0.68's: refresh, then
 ``_load_overload``) by the same without the refresh, keeping the runtime's initialisation, and
 wraps ``CPUCodeLibrary._unserialize`` and ``numba.core.environment._rebuild_env`` for the two
-above; it leaves numba as it is when those are not the ones it knows (another numba version)
-and ``ISAAC_EAGER_KERNEL_LOADING=1`` turns all three off. Imported by
+above; it leaves numba as it is on a numba release `TESTED_NUMBA` does not name, when those are
+not the ones it knows, and when ``ISAAC_EAGER_KERNEL_LOADING=1`` turns all three off. Imported by
 `isaac.engine.kernel_cache`, before any kernel of the engine or the recorder is loaded.
 
 `tolerate_stale_indexes` (installed by `isaac.engine.kernel_cache` for the caches it keys, with
@@ -55,18 +47,28 @@ import sys
 
 EAGER_ENV = "ISAAC_EAGER_KERNEL_LOADING"
 
+# the numba releases (major.minor) whose internals the replacements below were read from and
+# tested with; on any other numba loads its kernels itself (tests/test_kernel_loading.py)
+TESTED_NUMBA = ("0.68",)
+
+
+def tested_numba(version: str) -> bool:
+    """Whether numba ``version`` (e.g. ``'0.68.1'``) is one `TESTED_NUMBA` names."""
+    return ".".join(version.split(".")[:2]) in TESTED_NUMBA
+
 
 def install() -> bool:
     """Make cached loads skip numba's target refresh, the bitcode parse and the environments'
     imports (once a process); returns whether the lazy loading is in place (the refresh's
     replacement at least: the other two also check numba's code before they replace it)."""
+    import numba
     from numba.core import caching
 
     current = caching.Cache.load_overload
     if getattr(current, "isaac_lazy", False):
         return True
-    if os.environ.get(EAGER_ENV) == "1":
-        return False
+    if os.environ.get(EAGER_ENV) == "1" or not tested_numba(numba.__version__):
+        return False  # numba's own loading
     names = current.__code__.co_names
     if current.__qualname__ != "Cache.load_overload" or "_load_overload" not in names:
         return False  # not the method this replaces: leave numba alone

@@ -60,9 +60,11 @@ print(json.dumps({{"hashes": hashes, "loaded": loaded, "compiled": compiled, "ra
 DEFERRED = ("numba.np.arraymath", "numba.np.arrayobj", "numpy.ma")
 
 
-def _run(scene: str, **env) -> dict:
-    code = f"DEFERRED = {DEFERRED!r}\n" + _RUN.format(
-        scene=str(ROOT / "scenes" / scene), modules=REGISTRY_ONLY
+def _run(scene: str, prelude: str = "", **env) -> dict:
+    code = (
+        prelude
+        + f"DEFERRED = {DEFERRED!r}\n"
+        + _RUN.format(scene=str(ROOT / "scenes" / scene), modules=REGISTRY_ONLY)
     )
     proc = subprocess.run(
         [sys.executable, "-c", code],
@@ -89,6 +91,39 @@ def test_cached_kernels_load_without_the_compiler_registries_and_give_the_same_b
     assert lazy["compiled"] == eager["compiled"] == 14.0  # 0 + 1 + 4 + 9
     assert lazy["ran"] == [] and eager["ran"] == list(DEFERRED)
     assert lazy["same_sin_cos"] and eager["same_sin_cos"]
+
+
+# a numba release the replacements were not tested with (set before isaac is imported)
+_UNTESTED = """
+import numba
+numba.__version__ = "0.99.0"
+from numba.core import caching, environment
+from numba.core.codegen import CPUCodeLibrary
+OWN = (caching.Cache.load_overload, vars(CPUCodeLibrary)["_unserialize"], environment._rebuild_env)
+"""
+
+_STILL_OWN = """
+print(json.dumps({"own": [a is b for a, b in zip(OWN, (caching.Cache.load_overload,
+                  vars(CPUCodeLibrary)["_unserialize"], environment._rebuild_env))]}))
+"""
+
+
+@pytest.mark.skipif(
+    os.environ.get("NUMBA_DISABLE_JIT") == "1", reason="no kernel is loaded without the JIT"
+)
+def test_another_numba_release_loads_its_kernels_itself_with_the_same_bits():
+    _run("car.yaml")  # fills the cache if this checkout's kernels are not in it yet
+    lazy = _run("car.yaml")
+    other = _run("car.yaml", prelude=_UNTESTED)
+    assert lazy["lazy"] and not other["lazy"]
+    assert other["loaded"] == list(REGISTRY_ONLY)  # numba's own refresh ran
+    assert other["hashes"] == lazy["hashes"]
+    code = _UNTESTED + "import json\nfrom isaac import kernel_loading\n" + _STILL_OWN
+    proc = subprocess.run(
+        [sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=300
+    )
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    assert json.loads(proc.stdout.strip().splitlines()[-1])["own"] == [True, True, True]
 
 
 _KERNEL = """
