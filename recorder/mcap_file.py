@@ -202,7 +202,7 @@ class McapFile:
             index = self._index[channel] = []
         index.append(_ENTRY.pack(log_time, at))
         self._note(1, log_time, log_time)
-        if len(self._chunk) >= self.chunk_size - 100:
+        if len(self._chunk) > self.chunk_size:
             self._close_chunk()
 
     def end_step(self) -> None:
@@ -235,7 +235,7 @@ class McapFile:
                 while i <= cut:
                     # `add` closes the chunk after the first message that takes it past
                     # chunk_size: the first j >= i with size + (ends[j] - starts[i]) > chunk_size
-                    room = self.chunk_size - 100 - len(self._chunk)
+                    room = self.chunk_size - len(self._chunk)
                     j = max(i, int(np.searchsorted(ends, starts[i] + room, side="right")))
                     last = min(j, cut)
                     order, per, entries, lt_min, lt_max = index_entries(
