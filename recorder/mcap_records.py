@@ -216,7 +216,7 @@ def chunk_data(chunk: ChunkHead):
         elif kind == "zstd":
             import zstandard
 
-            declared = zstandard.frame_contentbyte_size(chunk.data)
+            declared = zstandard.frame_content_size(chunk.data)
             if declared > n:
                 raise RecordError(at, f"a zstd chunk's frame claims {declared} bytes, not {n}")
             data = zstandard.ZstdDecompressor().decompress(chunk.data, max_output_size=max(n, 1))
