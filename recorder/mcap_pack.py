@@ -7,8 +7,8 @@ buffer. `pack_records` writes every step's `/bodies`, `/contacts`, `/joints` (a 
 joints) and `/stats` (with the state hash), byte for byte what `recorder.mcap_writer`'s
 Python encoders give (tests compare), checks every float for NaN and infinity on the way and
 copies in the `/world` records the caller encoded for the steps where a body entered or left
-(rare: the caller finds them with `world_steps`). `recorder.mcap_chunks.RecordSink` then hands
-a whole stretch to the mcap library's chunk in one write. No Python runs per step or per
+(rare: the caller finds them with `world_steps`). `recorder.mcap_file.McapFile.append` then
+enters a whole stretch into the open chunk in one copy. No Python runs per step or per
 message on this path; it replaced about 15 us of Python per message (mcap's `add_message`,
 `Message.write`, the per-step encoders and frame parsing).
 
@@ -442,7 +442,7 @@ class Channels(NamedTuple):
 
 class BatchPacker:
     """Packs the steps of `isaac.engine.records.StepBatch`es into Message records
-    (`pack_records`), the producer's side of `recorder.mcap_chunks.RecordSink`: in this
+    (`pack_records`), the producer's side of `recorder.mcap_file.McapFile.append`: in this
     process (`recorder.mcap_writer.McapLogWriter.write_batch`) or into a writer process's
     shared memory (`recorder.writer_process.WriterProcess.write_batch`).
 

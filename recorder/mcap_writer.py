@@ -30,12 +30,12 @@ from dataclasses import asdict
 from typing import NamedTuple
 
 import numpy as np
-from mcap.writer import CompressionType, Writer
 
 from isaac.engine.records import StepRecord, state_hash
 from isaac.errors import LogError
 from recorder import schema as S
 from recorder.log_time import LogClock
+from recorder.mcap_file import COMPRESSIONS, McapFile
 from recorder.shapes import circle_radii
 
 PROFILE = "isaac"
@@ -46,12 +46,6 @@ READ_FORMAT_VERSIONS = ("1", "2")  # what the readers take
 SCENE_ATTACHMENT = "scene.yaml"
 META_START = "isaac"
 META_END = "isaac.end"
-
-COMPRESSION = {
-    "none": CompressionType.NONE,
-    "lz4": CompressionType.LZ4,
-    "zstd": CompressionType.ZSTD,
-}
 
 
 def channel_ids(joints: bool, foxglove: bool = False) -> dict[str, int]:
@@ -494,8 +488,8 @@ class McapLogWriter:
     ) -> None:
         if not 1 <= flush_every <= 100:
             raise ValueError("flush_every must be in 1..100")
-        if compression not in COMPRESSION:
-            raise ValueError(f"compression must be one of {sorted(COMPRESSION)}")
+        if compression not in COMPRESSIONS:
+            raise ValueError(f"compression must be one of {sorted(COMPRESSIONS)}")
         self.path = str(path)
         self.partial_path = self.path + ".partial"
         self.model = model
@@ -517,16 +511,16 @@ class McapLogWriter:
             self._file = open(self.partial_path, "wb")
         except OSError as exc:
             raise LogError(f"cannot write {self.partial_path}: {exc.strerror}") from exc
-        self._writer = Writer(
-            self._file, chunk_size=chunk_size, compression=COMPRESSION[compression]
+        # every message goes through it: it closes the chunk and flushes after the first step
+        # and every flush_every steps, and takes whole stretches of packed records
+        self._mcap = w = McapFile(
+            self._file,
+            chunk_size=chunk_size,
+            compression=compression,
+            flush_every=flush_every,
+            profile=PROFILE,
+            library=LIBRARY,
         )
-        w = self._writer
-        from recorder.mcap_chunks import RecordSink
-
-        # every message goes through the sink, which closes the chunk and flushes after the
-        # first step and every flush_every steps, and takes whole stretches of packed records
-        self._sink = RecordSink(w, None, flush_every)
-        w.start(profile=PROFILE, library=LIBRARY)
         # metadata and attachment first: they sit before every chunk and survive a crash
         if metadata is None:
             metadata = build_metadata(scene, scene_text, len(model.names))
@@ -562,7 +556,7 @@ class McapLogWriter:
             )
         if self._channel != channel_ids(with_joints, foxglove is not None):
             raise LogError("channel ids differ from recorder.mcap_writer.channel_ids")
-        self._sink.stats_channel = self._channel["/stats"]
+        w.stats_channel = self._channel["/stats"]
         self._packer = None  # recorder.mcap_pack.BatchPacker, made by the first write_batch
         self._file.flush()
         self._queue: queue.Queue | None = None
@@ -652,7 +646,7 @@ class McapLogWriter:
         """Append the steps of an `isaac.engine.records.StepBatch`: their Message records
         packed by one compiled call (`recorder.mcap_pack.BatchPacker`, the /stats values and
         the state hash included) and entered into the chunk a
-        stretch at a time (`recorder.mcap_chunks.RecordSink`), in this thread; with a writer
+        stretch at a time (`recorder.mcap_file.McapFile.append`), in this thread; with a writer
         thread, this thread only checks the batch (`recorder.mcap_pack.first_unfit`) and the
         thread packs and enters it. Returns how many steps were written: all, or those before
         the first one holding a NaN or an infinity (or contact rows that are not manifolds)."""
@@ -701,7 +695,7 @@ class McapLogWriter:
         buf = np.empty(int(plan.sizes[:steps].sum()), dtype=np.uint8)
         done, end, _ = self._packer.pack(buf, 0, 0, steps, batch, plan)
         if done:
-            self._sink.append(buf, 0, end)
+            self._mcap.append(buf, 0, end)
         return done
 
     def write_records(self, buf: np.ndarray, start: int, end: int, hashed: bool = True) -> None:
@@ -715,7 +709,7 @@ class McapLogWriter:
             from recorder.mcap_pack import put_hashes
 
             put_hashes(buf, start, end, record_channels(bool(self.joints)))
-        steps, last = self._sink.append(buf, start, end)
+        steps, last = self._mcap.append(buf, start, end)
         if steps:
             self.steps_written += steps
             self.last_step = last
@@ -756,13 +750,13 @@ class McapLogWriter:
     def _add(self, step, time, world_exists, bodies, contacts, stats, record, joints=None) -> None:
         """The step's messages (``/world`` first, with ``world_exists``, when given;
         ``/foxglove/scene`` when enabled, from ``record``), then the chunk closed when one is
-        due (`recorder.mcap_chunks.RecordSink.end_step`). Uses nothing a later `write`
+        due (`recorder.mcap_file.McapFile.end_step`). Uses nothing a later `write`
         changes: the writer thread runs behind."""
         if self.joints and joints is None:  # before any of the step's messages
             raise LogError(f"step {step}: no /joints message for a scene with joints")
         ch = self._channel
         t = self.clock(step)
-        add = self._sink.add
+        add = self._mcap.add
         if world_exists is not None:
             world = encode_world(self.model, step, time, world_exists, self.joints)
             add(ch["/world"], t, world, step)
@@ -773,7 +767,7 @@ class McapLogWriter:
         add(ch["/stats"], t, encode_stats(step, time, stats), step)
         if self.foxglove is not None:
             add(ch["/foxglove/scene"], t, self.foxglove.encode(record, t), step)
-        self._sink.end_step()
+        self._mcap.end_step()
 
     def _work(self) -> None:
         assert self._queue is not None
@@ -816,8 +810,8 @@ class McapLogWriter:
         if self._error is not None:
             self._file.close()
             raise LogError(f"writing {self.partial_path} failed: {self._error}")
-        self._writer.flush()
-        self._writer.add_metadata(
+        self._mcap.flush()
+        self._mcap.add_metadata(
             META_END,
             end_metadata(
                 complete=complete,
@@ -827,7 +821,7 @@ class McapLogWriter:
                 reason=reason,
             ),
         )
-        self._writer.finish()
+        self._mcap.finish()
         self._file.flush()
         if sync:
             os.fsync(self._file.fileno())
@@ -846,9 +840,9 @@ class McapLogWriter:
             self._closed = True
             try:
                 self._stop_worker()
-                self._writer.flush()
+                self._mcap.flush()
                 if reason is not None and self._error is None:
-                    self._writer.add_metadata(
+                    self._mcap.add_metadata(
                         META_END,
                         end_metadata(
                             complete=False,

@@ -40,7 +40,7 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 from mcap.records import Header, Metadata
-from mcap.writer import Writer
+from mcap.writer import CompressionType, Writer
 
 from isaac.engine.records import JOINT_FIELDS, Contacts, JointRows, StepRecord
 from isaac.errors import LogError, SceneError
@@ -61,7 +61,6 @@ from recorder.mcap_records import (
     open_log,
 )
 from recorder.mcap_writer import (
-    COMPRESSION,
     FORMAT_NAME,
     META_END,
     META_START,
@@ -820,7 +819,7 @@ def recover(src: str, dst: str) -> Recovered:
             writer = Writer(
                 out,
                 chunk_size=256 * 1024,
-                compression=COMPRESSION.get(compression, COMPRESSION["none"]),
+                compression=_COMPRESSION.get(compression, CompressionType.NONE),
             )
             header = log.header
             writer.start(
@@ -875,6 +874,10 @@ def recover(src: str, dst: str) -> Recovered:
         os.unlink(tmp)
         raise LogError(f"cannot write {dst}: {exc.strerror or exc}") from None
     return Recovered(count, last, lost, restated)
+
+
+# a recovered copy's chunk compression, from the source's name of it
+_COMPRESSION = {"lz4": CompressionType.LZ4, "zstd": CompressionType.ZSTD}
 
 
 def _lost(reader: StepReader) -> str | None:

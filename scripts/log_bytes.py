@@ -7,8 +7,8 @@ The run is simulated once; its records are then written in this process by the r
 writer (`recorder.mcap_writer.McapLogWriter`, 256 KiB chunks, the recorder's flush rule) once
 per layout and compression, format 1's /contacts from `encode_contacts_v1`, so the two layouts
 differ in that message alone. The compressor's time is the CPU time (``time.process_time``)
-spent in the mcap writer's calls of ``lz4.frame.compress`` and ``zstandard.compress``, per step,
-best and worst of ``--reps`` writes (the machine may be busy).
+spent in the MCAP writer's (`recorder.mcap_file`) calls of ``lz4.frame.compress`` and
+``zstandard.compress``, per step, best and worst of ``--reps`` writes (the machine may be busy).
 Figures go to docs/log-format.md.
 """
 
@@ -48,14 +48,12 @@ def _timed(compress):
 
 
 def _time_the_compressors() -> None:
-    import types
-
+    # recorder.mcap_file looks the codec up when a log is opened: wrapped here, it is timed
     import lz4.frame
-    import mcap.writer as mw
     import zstandard
 
-    mw.lz4 = types.SimpleNamespace(frame=types.SimpleNamespace(compress=_timed(lz4.frame.compress)))
-    mw.zstandard = types.SimpleNamespace(compress=_timed(zstandard.compress))
+    lz4.frame.compress = _timed(lz4.frame.compress)
+    zstandard.compress = _timed(zstandard.compress)
 
 
 def _records(path: str):
