@@ -90,19 +90,17 @@ def solve_point(t, v, inv, a, b, h, inv_h):
     rby = t[RBY]
     if slow_turns(v, a, b, h):
         ex, ey = end_separation(rax, ray, rbx, rby, v, a, b, h)
-        ix = -(t[K11] * ex + t[K12] * ey) * inv_h
-        iy = -(t[K12] * ex + t[K22] * ey) * inv_h
-        t[J0] += ix
-        t[J1] += iy
-        apply(v, inv, a, b, ix, iy, rax * iy - ray * ix, rbx * iy - rby * ix)
+        k11 = t[K11]
+        k12 = t[K12]
+        k22 = t[K22]
     else:  # a Newton step about the arms the sub-step ends with (`end_arms`)
-        pax, pay, pbx, pby, ex, ey = end_arms(rax, ray, rbx, rby, v, a, b, h)
-        k11, k12, k22 = point_mass(inv[a, 0], inv[a, 1], inv[b, 0], inv[b, 1], pax, pay, pbx, pby)
-        ix = -(k11 * ex + k12 * ey) * inv_h
-        iy = -(k12 * ex + k22 * ey) * inv_h
-        t[J0] += ix
-        t[J1] += iy
-        apply(v, inv, a, b, ix, iy, pax * iy - pay * ix, pbx * iy - pby * ix)
+        rax, ray, rbx, rby, ex, ey = end_arms(rax, ray, rbx, rby, v, a, b, h)
+        k11, k12, k22 = point_mass(inv[a, 0], inv[a, 1], inv[b, 0], inv[b, 1], rax, ray, rbx, rby)
+    ix = -(k11 * ex + k12 * ey) * inv_h
+    iy = -(k12 * ex + k22 * ey) * inv_h
+    t[J0] += ix
+    t[J1] += iy
+    apply(v, inv, a, b, ix, iy, rax * iy - ray * ix, rbx * iy - rby * ix)
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
