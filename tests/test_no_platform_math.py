@@ -37,7 +37,7 @@ REQUIRED = {
     "isaac.engine.driver.run_steps_sequential",
     "isaac.engine.driver.run_steps_sequential_joints",
     "isaac.engine.driver.run_steps_sequential_joints_timed",
-    "isaac.engine.joints.solve_joint_velocities",
+    "isaac.engine.joints.joint.solve_joint_velocities",
     "isaac.engine.broad_phase.find_pairs",
     "isaac.engine.narrow_phase.collide_pairs",
     "isaac.engine.push_out.push_out",
