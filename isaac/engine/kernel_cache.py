@@ -34,11 +34,13 @@ def files_key(root, paths, seed: str = "") -> str:
 
 def _sources_key(package_root) -> str:
     """The engine's key: the files of isaac/engine, isaac/trig.py and isaac/collision_filter.py,
-    the sources every engine kernel may compile in."""
+    the sources every engine kernel may compile in, and isaac/kernel_loading.py, whose
+    functions a cached kernel's data may name (an engine that had lazy environments pickled
+    its own `_rebuild_env` into every kernel it saved)."""
     from pathlib import Path
 
     root = Path(package_root)
-    shared = [root / "trig.py", root / "collision_filter.py"]
+    shared = [root / "trig.py", root / "collision_filter.py", root / "kernel_loading.py"]
     return files_key(root, [*(root / "engine").rglob("*.py"), *shared])
 
 
