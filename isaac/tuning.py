@@ -3,19 +3,17 @@
 reuse_large_buffers: glibc hands every allocation above its mmap threshold (128 KiB to start
 with) fresh pages from the kernel and returns them on free, so a buffer of that size made every
 step (a 150 kB MCAP message, a contact array of a large scene) pays for zeroing new pages each
-time. Raising the threshold keeps such buffers in the heap and reuses them: encoding the 500-body
-pile's contacts went from about 100 to 6 microseconds a step. It changes no result, only where
-memory comes from; on a C library without mallopt it does nothing.
+time. Raising the threshold keeps such buffers in the heap and reuses them (bench/HISTORY.md has
+what it saved on the 500-body pile's contacts). It changes no result, only where memory comes
+from; on a C library without mallopt it does nothing.
 
 one_blas_thread: numpy's OpenBLAS starts a thread per CPU when numpy is imported, and those
 threads spin a while waiting for work that never comes: nothing ISAAC runs calls BLAS with
 matrices big enough to share out (the step is numba kernels; the tools multiply 2 x 2 and
-k x 2 arrays). On the 2-core machine the spinning cost every process that imports numpy
-0.05-0.1 s of CPU, taken from the other process of a recorded run: `isaac run
-scenes/default.yaml --mcap A --rrd B` (three processes' start-ups at once) used 1.23 s of CPU
-and 1.57x the plain run's wall time with the pool, 0.88 s and 1.42x without (2026-12-03,
-paired runs). Dask's workers get the same setting from Dask itself (its nanny's
-``pre-spawn-environ``). It changes no result.
+k x 2 arrays). On a 2-core machine that spinning is CPU taken from the other processes of a
+recorded run, which start up at the same time (the recording rows of bench/results/latest.md).
+Dask's workers get the same setting from Dask itself (its nanny's ``pre-spawn-environ``). It
+changes no result.
 """
 
 from __future__ import annotations
@@ -39,8 +37,8 @@ def reuse_large_buffers() -> bool:
         return True
     try:
         # the C library this interpreter runs on (its own symbols); ctypes.util is imported
-        # only when that has no mallopt (it imports subprocess, tempfile, shutil: 10-30 ms of
-        # every command's start-up)
+        # only when that has no mallopt (it imports subprocess, tempfile and shutil, on every
+        # command's start-up)
         mallopt = ctypes.CDLL(None).mallopt
     except (OSError, AttributeError):
         try:

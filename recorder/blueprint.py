@@ -30,7 +30,7 @@ if TYPE_CHECKING:
 
 # rerun-sdk is imported inside the functions that build its objects: the constants below are
 # also read by the drawing half of the writer (`recorder.rerun_writer`), which runs in the
-# simulating process and must not pay for importing rerun (0.4-0.5 s of CPU); only the process
+# simulating process and must not pay for importing rerun (a large import); only the process
 # that sends (`recorder.rerun_send`) calls the functions
 
 
@@ -114,8 +114,8 @@ def annotation_context() -> rr.AnnotationContext:
     """The legend as Rerun annotations: class id -> label and colour (logged on ``world``).
 
     Built as the arrow array of Rerun's own component type: Rerun's conversion of
-    `rr.AnnotationInfo`s casts a list array, which imports ``pyarrow.compute`` (70-90 ms of the
-    Rerun sender's 0.11-0.13 s of work in a short run, on the recorded run's critical path).
+    `rr.AnnotationInfo`s casts a list array, which imports ``pyarrow.compute`` (most of the
+    Rerun sender's work in a short run, on the recorded run's critical path).
     The same array (tests/recorder/test_rerun_blueprint.py compares it with Rerun's conversion).
     """
     import pyarrow as pa

@@ -51,7 +51,7 @@ COMMAND_MODULES = (
     "isaac.app.sweep",
 )
 # the module of each sub-command (tests/test_cli_start.py checks it against COMMAND_MODULES):
-# a command line naming one imports that module alone (the others took 30-40 ms to import)
+# a command line naming one imports that module alone (importing the others is start-up time)
 COMMANDS = {
     "run": "isaac.app.run",
     "check": "isaac.app.run",
@@ -114,10 +114,10 @@ def _end_now(status: int) -> None:
     """End the `isaac` process now, with `status`, without the interpreter's teardown.
 
     Why: once a command has closed its files, Python's teardown (freeing numba's and LLVM's
-    objects and every module) took 0.12 s of a 0.6 s `isaac run` of the default scene and
-    0.17-0.2 s with its recordings (2-core machine; 0.05 s after importing numba alone). What
-    a normal exit does that matters still happens: the `atexit` handlers run (numba's, dask's,
-    multiprocessing's, the compile helpers' reaping) and the standard streams are flushed.
+    objects and every module) is a noticeable part of a short `isaac run`, more with its
+    recordings (docs/speed.md, the start-up). What a normal exit does that matters still
+    happens: the `atexit` handlers run (numba's, dask's, multiprocessing's, the compile
+    helpers' reaping) and the standard streams are flushed.
     Every file a command writes is closed before it returns. Returns (and the normal exit
     follows) when a non-daemon thread is still alive, which a normal exit would wait for, or
     when this Python has no `atexit._run_exitfuncs`.

@@ -1,8 +1,8 @@
 """Reading back, fast, the exact text `scene_to_yaml` writes: the scene a log stores.
 
-The YAML reader builds a node tree of the whole document (about 2 us and 160 bytes a node, 50
-nodes a body of `scene_to_yaml`'s text) and reads each node in Python: a 100,000-body log's
-scene took 87 s and 2 GB. Here the writer's lines are matched by regular expressions, a body
+The YAML reader builds a node tree of the whole document (50 nodes a body of `scene_to_yaml`'s
+text) and reads each node in Python: a 100,000-body log's scene takes over a minute and
+gigabytes that way. Here the writer's lines are matched by regular expressions, a body
 (12 lines) per match, and the bodies built directly; the name, world and `analytic` lines
 (a few dozen) still go through the YAML reader, and every body through the same checks the
 loader runs on an expanded scene (isaac.scene.checks.first_problem).

@@ -51,7 +51,7 @@ MAX_MOTOR_FORCE = 1e15  # N
 # Input size. A scene text in the exact form `scene_to_yaml` writes (what a log stores) is read
 # by a line reader that builds no YAML node tree (isaac.scene.fast_reader), in time and memory
 # linear in its size: up to MAX_SCENE_BYTES, the text of 100,000 bodies of 50 vertices (about
-# 230 MB). Any other YAML goes through a node tree (about 160 bytes and 2 us per node), bounded
+# 230 MB). Any other YAML goes through a node tree (memory and time per node), bounded
 # by bytes, nodes, list length and nesting, so hostile input is refused in seconds and a few
 # hundred MB: MAX_YAML_NODES is 30 nodes for each of MAX_BODIES bodies (a hand-written body
 # with a name, a box, a position and a velocity is about 15).

@@ -129,7 +129,7 @@ def place(bodies) -> Placement:
 def _quantile_90(x: np.ndarray) -> float:
     """np.quantile(x, 0.9) (its default linear method, the same value bit for bit) without
     np.quantile, which imports numpy.ma (through np.unique) on every start-up that checks a
-    scene: 5-10 ms of CPU."""
+    scene."""
     s = np.sort(x)
     at = (len(s) - 1) * 0.9
     i = int(at)

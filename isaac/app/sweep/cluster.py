@@ -30,9 +30,9 @@ class _IgnoreInterrupt:
 # Dask's monitoring, for the local cluster only: each of the scheduler's and the workers' event
 # loops otherwise wakes every 20 ms (tick: is the loop blocked?), samples the running task's
 # stack every 10 ms (the dashboard's profile, which a sweep's cluster does not serve), and reads
-# the process's memory and CPU every 100 / 500 ms. Idle, that cost the 2-worker cluster about
-# 0.09 of a core (the client's process 0.03, each worker 0.027); with these, 0.018. A sweep on
-# 2 workers of a 2-core machine has no core to spare for it.
+# the process's memory and CPU every 100 / 500 ms (Dask's defaults). Idle, that keeps a
+# noticeable part of a core busy, and a sweep on 2 workers of a 2-core machine has no core to
+# spare for it (bench/HISTORY.md has the figures).
 QUIET = {
     "distributed.worker.profile.enabled": False,
     "distributed.admin.tick.interval": "1s",

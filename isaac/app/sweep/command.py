@@ -46,10 +46,10 @@ from isaac.app.sweep.cluster import MAX_LOCAL_WORKERS, result_noting, start_clus
 from isaac.app.sweep.spec import Sweep, SweepError, load_runs, load_sweep, refusal
 from isaac.errors import IsaacError
 
-# runs per task at most: a chunk costs about 8 ms of CPU besides its runs (its check, summary
-# and run tasks, trivial ones timed on the 2-worker local cluster, 2026-12-02: 3 ms in this
-# process, which holds the scheduler, and 5 in the workers), a small run about 1.5 ms; a
-# rescheduled chunk redoes only its unfinished runs (their rows are on disk), so chunks may be big
+# runs per task at most: a chunk costs several small runs' worth of CPU besides its runs (its
+# check, summary and run tasks, in this process, which holds the scheduler, and in the workers);
+# a rescheduled chunk redoes only its unfinished runs (their rows are on disk), so chunks may be
+# big
 MAX_CHUNK = 250
 # chunk sizes shrink as the runs left do (guided self-scheduling, in rounds of one chunk per
 # worker): each round's chunks are the runs left over TASKS_PER_WORKER x workers, so the last
@@ -57,7 +57,7 @@ MAX_CHUNK = 250
 # the fan-out, are small, and the last round splits what is left evenly (no lone tail chunk)
 TASKS_PER_WORKER = 2
 # ... but no smaller than this many body-steps (the base scene's bodies x steps a run): 20 runs
-# of a 2-body scene at 200 steps (about 30 ms), one run of a 100-body pile
+# of a 2-body scene at 200 steps, one run of a 100-body pile
 MIN_CHUNK_BODY_STEPS = 8_000
 MAX_WARM_UP = 8  # distinct world settings compiled before the fan-out (others as they come)
 # runs whose scenes are checked here before a local cluster is started, for at most this long:
@@ -445,7 +445,7 @@ def _fan_out(
         by_future = {f.key: k for k, f in enumerate(futures[:-1])}
         # the rows stay on the workers until every chunk is done and then come in one gather
         # (a message per worker): fetching each chunk's rows as it finished cost this process
-        # and the workers about 2.5 ms of CPU a chunk, taken from the runs on a 2-core machine
+        # and the workers CPU a chunk, taken from the runs on a 2-core machine
         # ... except that once no more than the last round is running (a chunk a worker at
         # most), the rows of the chunks finished so far are fetched while it runs: the gather
         # at the end then waits for the last chunks' rows alone

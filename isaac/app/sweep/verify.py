@@ -78,9 +78,8 @@ def verify(out_dir: str, *, client=None, scheduler=None, workers=None, progress=
     written to OUT/verify.parquet). SweepError for a folder that holds no sweep table.
 
     The first log is replayed alone, before the others go out: on a cold numba cache one worker
-    compiles the replay's kernels and the others load them, instead of each compiling them (10
-    logs on 2 workers, cold: 29.5 s and 53 s of CPU before). `note` is called with a status
-    line when that first replay is slow."""
+    compiles the replay's kernels and the others load them, instead of each compiling them.
+    `note` is called with a status line when that first replay is slow."""
     import pyarrow as pa
     import pyarrow.parquet as pq
     from dask.distributed import as_completed

@@ -9,9 +9,9 @@ A run's files, in the sweep's output folder:
 - ``logs/run-000123.mcap``: moved there (one rename) once the log is on disk. The recorder
   closes a run's log without an fsync; at the end of its chunk, one sync of the file system
   (`publish_logs`: ``syncfs``) makes all the chunk's logs durable, and only then are they moved
-  to their final names. An fsync per file cost about a fifth of a small recorded run (1-4 ms
-  of waiting on the disk a log); one sync per chunk costs a few ms for up to 250 logs. So a
-  final name never holds a half-written log, even after a power loss.
+  to their final names. An fsync per file would make every small recorded run wait on the
+  disk; one sync per chunk is paid once for up to 250 logs. So a final name never holds a
+  half-written log, even after a power loss.
 - ``rows/chunk-000120.jsonl``: the rows of the chunk whose first run is 120, one JSON line per
   run, each appended (and flushed) once the run's logs are closed (and their sha256 taken). A
   chunk that Dask runs again after its worker died finds the rows of the runs already done and
