@@ -86,14 +86,17 @@ def _generator_yaml(name: str, steps: int, generator: str, params: dict) -> str:
     return yaml.safe_dump(doc, sort_keys=False, default_flow_style=None)
 
 
-def _pyramid_params(rows: int) -> dict:
-    # a 5 cm gap between neighbours: Box2D keeps a 1 cm skin around each polygon, so boxes that
-    # touch exactly would be pushed sideways in Box2D alone.
+# a 5 cm gap between neighbours: Box2D 2.3 keeps a 1 cm skin around each polygon, so boxes that
+# touch exactly would be pushed sideways in Box2D 2.3 alone
+PYRAMID_SPACING = 0.05  # m
+
+
+def _pyramid_params(rows: int, spacing: float = PYRAMID_SPACING) -> dict:
     return dict(
         rows=rows,
         box=list(PYRAMID_BOX),
         base=[0.0, 0.0],
-        spacing=0.05,
+        spacing=spacing,
         ground=True,
         density=1.0,
         friction=FRICTION,
@@ -102,10 +105,10 @@ def _pyramid_params(rows: int) -> dict:
     )
 
 
-def _expand_pyramid(rows: int, steps: int) -> Scene:
+def _expand_pyramid(rows: int, steps: int, spacing: float) -> Scene:
     from isaac.scene.generators import pyramid
 
-    p = _pyramid_params(rows)
+    p = _pyramid_params(rows, spacing)
     p = dict(p, box=tuple(p["box"]), base=tuple(p["base"]))
     return Scene(name=f"pyramid-{rows}", world=world(steps=steps), bodies=tuple(pyramid(**p)))
 
@@ -265,17 +268,23 @@ def _load_or_expand(yaml_text: str | None, expand) -> Scene:
     return replace(expand(), source="bench expansion (isaac.scene.load_scene_text missing)")
 
 
-# name -> (builder, group) ; groups: "timing" scenes are in the growth fit / main table
 PYRAMID_ROWS = (10, 20, 40)
+# Box2D v3's own `large_pyramid` benchmark (benchmark/main.c, built by CreateLargePyramid in
+# shared/benchmarks.c): a base of 100 boxes of b2MakeSquare(0.5), i.e. 1 m, each row's boxes
+# touching (centres 1 m apart, no gap), row k's first centre at x = -49.5 + 0.5 k, y = k + 0.5,
+# density 1, Box2D's default friction 0.6: 5,050 boxes, the same as this pyramid of 100 rows
+# with no spacing. Its ground is a 200 m x 2 m box with its top at y = 0; here the generator's
+# ground (104 m x 1 m, its top at y = 0 too) carries it: the boxes touch its top face alone.
+LARGE_PYRAMID_ROWS = 100
 PILE_COUNTS = (100, 500, 2000, 10000)
 PILE_SEED = 7
 
 
-def _pyramid(rows: int) -> BenchScene:
+def _pyramid(rows: int, spacing: float = PYRAMID_SPACING) -> BenchScene:
     warm, timed = 60, 240
     steps = warm + timed
-    text = _generator_yaml(f"pyramid-{rows}", steps, "pyramid", _pyramid_params(rows))
-    scene = _load_or_expand(text, lambda: _expand_pyramid(rows, steps))
+    text = _generator_yaml(f"pyramid-{rows}", steps, "pyramid", _pyramid_params(rows, spacing))
+    scene = _load_or_expand(text, lambda: _expand_pyramid(rows, steps, spacing))
     dynamic = [k for k, b in enumerate(scene.bodies) if not b.concrete]
     top = max(dynamic, key=lambda k: scene.bodies[k].position[1])
     return BenchScene(
@@ -344,6 +353,7 @@ def _shipped(name: str, kind: str, file: str) -> BenchScene:
 
 BUILDERS = {
     **{f"pyramid-{r}": (lambda r=r: _pyramid(r)) for r in PYRAMID_ROWS},
+    f"pyramid-{LARGE_PYRAMID_ROWS}": lambda: _pyramid(LARGE_PYRAMID_ROWS, spacing=0.0),
     **{f"pile-{c}": (lambda c=c: _pile(c)) for c in PILE_COUNTS},
     "head-on": _head_on,
     "mass-ratio": _mass_ratio,

@@ -5,8 +5,8 @@ What it does, in order:
    its own process (`bench.worker`): ms/step over a timed block after warm-up (compile and
    start-up excluded), memory per body, and a quality figure from the final poses measured by
    the same code for every engine (bench.quality).
-2. Medians over repetitions; each engine's ratio to pymunk is computed per repetition (the same
-   run) and the median of those ratios is reported.
+2. Medians over repetitions; each engine's ratio to pymunk (and to Box2D v3 when it ran) is
+   computed per repetition (the same run) and the median of those ratios is reported.
 3. Growth: least-squares slope of log(ms/step) against log(bodies) over the piles.
 4. Start-up: first run (fresh NUMBA_CACHE_DIR: compile included) and cached start-up to the
    first step, each a whole `python -c` process timed from outside.
@@ -42,7 +42,7 @@ from pathlib import Path
 
 import numpy as np
 
-from bench.peers import PEERS, engine_available
+from bench.peers import OWN_PROCESS, PEERS, box2d_v3, engine_available
 from bench.scenes import ALL_SCENES, GROWTH_SCENES, QUICK_SCENES
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -51,6 +51,8 @@ README_START = "<!-- bench:start -->"
 README_END = "<!-- bench:end -->"
 DEFAULT_PRESETS = ("fast", "balanced")
 BASELINE = "pymunk"
+# the second baseline, when its row ran (bench/peers/box2d_v3.py: built from --box2d-v3 SRC)
+BOX2D_V3 = "box2d-v3"
 
 # the issue's targets for ISAAC: (what, limit)
 TARGETS = (
@@ -106,12 +108,18 @@ def fused_engines(engines: list[str], modes: list[str]) -> list[str]:
     return [f"{e}/{m}" for e in presets for m in FUSED_MODES]
 
 
-def run_worker(scene: str, engine: str, timeout: float) -> dict:
-    """One (scene, engine) repetition in a fresh process; a failure becomes a row with `error`."""
+def run_worker(scene: str, engine: str, timeout: float, env: dict[str, str] | None = None) -> dict:
+    """One (scene, engine) repetition in a fresh process (`env`: extra environment variables);
+    a failure becomes a row with `error`."""
     cmd = python_cmd("bench.worker", "--scene", scene, "--engine", engine)
     try:
         proc = subprocess.run(
-            cmd, capture_output=True, text=True, cwd=ROOT, env=subprocess_env(), timeout=timeout
+            cmd,
+            capture_output=True,
+            text=True,
+            cwd=ROOT,
+            env=subprocess_env(**(env or {})),
+            timeout=timeout,
         )
     except subprocess.TimeoutExpired:
         return dict(scene=scene, engine=engine, error=f"timed out after {timeout:.0f} s")
@@ -158,15 +166,22 @@ def quality_text(q: dict | None) -> str:
     return bad + json.dumps(q)
 
 
+def _median_ratio(ok: list[dict], base: list[dict]) -> float | None:
+    """The median over repetitions of ms/step over the baseline's in the same repetition."""
+    base_ms = {b["rep"]: b["ms_per_step"] for b in base if "error" not in b}
+    ratios = [r["ms_per_step"] / base_ms[r["rep"]] for r in ok if r["rep"] in base_ms]
+    return statistics.median(ratios) if ratios else None
+
+
 def aggregate(runs: list[dict], scenes: list[str], engines: list[str]) -> list[dict]:
-    """Median ms/step per (scene, engine) and the median of per-repetition ratios to pymunk."""
+    """Median ms/step per (scene, engine) and the median of per-repetition ratios to pymunk and
+    to Box2D v3 (None where that baseline did not run)."""
     rows = []
     for scene in scenes:
         by_engine: dict[str, list[dict]] = {}
         for r in runs:
             if r["scene"] == scene:
                 by_engine.setdefault(r["engine_arg"], []).append(r)
-        base = by_engine.get(BASELINE, [])
         for engine in engines:
             reps = by_engine.get(engine, [])
             ok = [r for r in reps if "error" not in r]
@@ -176,8 +191,6 @@ def aggregate(runs: list[dict], scenes: list[str], engines: list[str]) -> list[d
                 rows.append(dict(kind="row", scene=scene, engine=engine, error=reps[0]["error"]))
                 continue
             ms = [r["ms_per_step"] for r in ok]
-            base_ms = {b["rep"]: b["ms_per_step"] for b in base if "error" not in b}
-            ratios = [r["ms_per_step"] / base_ms[r["rep"]] for r in ok if r["rep"] in base_ms]
             first = ok[0]
             rows.append(
                 dict(
@@ -192,7 +205,8 @@ def aggregate(runs: list[dict], scenes: list[str], engines: list[str]) -> list[d
                     ms_per_step_min=min(ms),
                     ms_per_step_max=max(ms),
                     steps_per_s=1000.0 / statistics.median(ms),
-                    ratio_to_pymunk=statistics.median(ratios) if ratios else None,
+                    ratio_to_pymunk=_median_ratio(ok, by_engine.get(BASELINE, [])),
+                    ratio_to_box2d_v3=_median_ratio(ok, by_engine.get(BOX2D_V3, [])),
                     memory_per_body_bytes=statistics.median(r["memory_per_body_bytes"] for r in ok),
                     timed_steps=first["timed_steps"],
                     warmup_steps=first["warmup_steps"],
@@ -498,19 +512,23 @@ def markdown(meta, rows, growth_rows, startup_rows, recs, targets, first_cli=Non
         f"Benchmark of {provenance(meta)}. "
         f"dt = 1/60 s, no sleeping, friction on (except head-on and tunneling); "
         f"{meta['reps']} repetitions per engine, interleaved, each in its own process; "
-        "medians. Ratio = median over repetitions of (engine / pymunk) from the same "
-        "repetition. Memory per body = (RSS after build and warm-up - RSS before build) / "
-        "bodies.",
+        "medians. Ratio = median over repetitions of (engine / pymunk, engine / Box2D v3 when "
+        "it ran) from the same repetition. Memory per body = (RSS after build and warm-up - "
+        "RSS before build) / bodies.",
         "",
     ]
+    # the Box2D v3 column only in a run that has its rows
+    v3 = any(r.get("ratio_to_box2d_v3") is not None for r in rows)
     lines += [
         "| scene | bodies | engine | settings | ms/step | steps/s | ratio to pymunk | "
-        "memory/body | quality |",
-        "|---|---|---|---|---|---|---|---|---|",
+        + ("ratio to Box2D v3 | " if v3 else "")
+        + "memory/body | quality |",
+        "|---|---|---|---|---|---|---|" + ("---|" if v3 else "") + "---|---|",
     ]
     for r in rows:
         if "error" in r:
-            lines.append(f"| {r['scene']} | | {r['engine']} | | error: {r['error']} | | | | |")
+            cells = "| | | | |" + (" |" if v3 else "")
+            lines.append(f"| {r['scene']} | | {r['engine']} | | error: {r['error']} {cells}")
             continue
         spread = f" ({fmt(r['ms_per_step_min'])}–{fmt(r['ms_per_step_max'])})"
         mem = r["memory_per_body_bytes"]
@@ -518,7 +536,9 @@ def markdown(meta, rows, growth_rows, startup_rows, recs, targets, first_cli=Non
         lines.append(
             f"| {r['scene']} | {r['n_bodies']} | {r['engine']} | {r['settings']} | "
             f"{fmt(r['ms_per_step'])}{spread} | {r['steps_per_s']:.0f} | "
-            f"{fmt(r['ratio_to_pymunk'])} | {mem_text} | {r['quality_text']} |"
+            f"{fmt(r['ratio_to_pymunk'])} | "
+            + (f"{fmt(r.get('ratio_to_box2d_v3'))} | " if v3 else "")
+            + f"{mem_text} | {r['quality_text']} |"
         )
     steps = {}
     for r in rows:
@@ -533,7 +553,7 @@ def markdown(meta, rows, growth_rows, startup_rows, recs, targets, first_cli=Non
         f"Steps (warm-up + timed): {steps_text}. ms/step is the timed block's mean; "
         "quality is measured on the final poses. Pile overlap is "
         "the deepest SAT penetration over all touching pairs (bench/quality.py, the same "
-        "code for every engine); Box2D rests polygons on a 1 cm skin, so it shows little "
+        "code for every engine); Box2D 2.3 rests polygons on a 1 cm skin, so it shows little "
         "overlap. A pyramid stands while no box has moved half a box sideways or down nor "
         "turned 0.1 rad. Memory per body is shown from 500 bodies up (page-size noise "
         "below).",
@@ -650,7 +670,7 @@ def markdown(meta, rows, growth_rows, startup_rows, recs, targets, first_cli=Non
             )
         lines.append("")
     if meta.get("skipped"):
-        lines += [f"Skipped: {s}" for s in meta["skipped"]] + [""]
+        lines += [*meta["skipped"], ""]
     return "\n".join(lines)
 
 
@@ -750,7 +770,18 @@ def parse_args(argv):
         help=f"a fast subset: {', '.join(QUICK_SCENES)}; 2 repetitions; no extras",
     )
     p.add_argument("--scenes", help=f"comma-separated, from: {', '.join(ALL_SCENES)}")
-    p.add_argument("--engines", help="comma-separated: pymunk, box2d, isaac (default: all three)")
+    p.add_argument(
+        "--engines",
+        help="comma-separated: pymunk, box2d, box2d-v3, isaac (default: all four; box2d-v3 runs "
+        "when --box2d-v3 or ISAAC_BOX2D_V3 names its source)",
+    )
+    p.add_argument(
+        "--box2d-v3",
+        metavar="SRC",
+        help="a Box2D v3 source tree or its .tar.gz: built once into $XDG_CACHE_HOME/isaac/"
+        "box2d-v3 (bench/peers/box2d_v3.py) and run as the box2d-v3 row "
+        "(default: $ISAAC_BOX2D_V3)",
+    )
     p.add_argument(
         "--isaac-modes",
         default="step",
@@ -791,6 +822,12 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     reps = args.reps or (2 if args.quick else 5)
     wanted = args.engines.split(",") if args.engines else [*PEERS, "isaac"]
+    try:
+        v3_source = box2d_v3.source_from(args.box2d_v3)
+    except box2d_v3.SourceError as exc:
+        print(f"bench: {exc}", file=sys.stderr)
+        return 2
+    v3_build, worker_env = None, {}
     presets = [p for p in args.presets.split(",") if p]
     modes = [m for m in args.isaac_modes.split(",") if m]
     if not modes or any(m not in ISAAC_MODES for m in modes):
@@ -798,6 +835,20 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     engines, skipped = [], []
     for name in wanted:
+        if name == BOX2D_V3:
+            # built here, once, so that no repetition times a build and a failure is one line
+            try:
+                if v3_source is None:
+                    raise LookupError(box2d_v3.NO_SOURCE_NOTE)
+                log(f"bench: Box2D v3 from {v3_source} (cache: {box2d_v3.cache_root()})")
+                v3_build = box2d_v3.ensure_built(v3_source)
+            except (LookupError, box2d_v3.BuildError) as exc:
+                skipped.append(str(exc))
+                log(f"bench: {exc}")
+                continue
+            engines.append(name)
+            worker_env[box2d_v3.ENV] = str(v3_source)
+            continue
         names = (
             [f"isaac-{p}" + ("" if m == "step" else f"/{m}") for p in presets for m in modes]
             if name == "isaac"
@@ -807,7 +858,7 @@ def main(argv: list[str] | None = None) -> int:
         if ok:
             engines += names
         else:
-            skipped.append(f"{name}: not available ({why})")
+            skipped.append(f"{name}: not run (not available: {why})")
             log(f"bench: skipping {name}: {why}")
     if not engines:
         print("bench: no engine available", file=sys.stderr)
@@ -824,7 +875,7 @@ def main(argv: list[str] | None = None) -> int:
         scene_engines = engines + (fused if scene in FUSED_SCENES else [])
         for rep in range(scene_reps):
             for engine in scene_engines:
-                r = run_worker(scene, engine, args.timeout)
+                r = run_worker(scene, engine, args.timeout, worker_env)
                 r.update(kind="run", rep=rep, engine_arg=engine)
                 runs.append(r)
                 ms = r.get("ms_per_step")
@@ -840,7 +891,7 @@ def main(argv: list[str] | None = None) -> int:
     startup_rows = []
     first_cli = None
     if not args.no_startup and not args.quick:
-        startup_rows = startup(engines, reps=3)
+        startup_rows = startup([e for e in engines if e not in OWN_PROCESS], reps=3)
         first_cli = first_cli_run(reps=2)
         log(f"  first {FIRST_RUN_CLI}: {first_cli}")
     recs = []
@@ -858,6 +909,8 @@ def main(argv: list[str] | None = None) -> int:
         log(f"  sweep: {sweeps[-1].get('error') or 'done'}")
 
     meta = meta_info(reps, skipped)
+    if v3_build is not None:
+        meta["versions"] += f", Box2D v3 {v3_build.version} ({v3_build.source.name})"
     meta["elapsed_s"] = time.perf_counter() - t_start
     meta["scenes"], meta["engines"] = scenes, engines
     text = markdown(meta, rows, growth_rows, startup_rows, recs, targets, first_cli)

@@ -12,6 +12,10 @@ Order inside the process:
    memory per body = (RSS after warm-up - baseline) / n;
 4. time `timed_steps` steps with one perf_counter block (ms/step = block / steps);
 5. the quality figure from the final poses (bench.quality, the same code for every engine).
+
+An engine that runs a whole scene in its own compiled process (bench.peers.OWN_PROCESS: Box2D
+v3) takes steps 3 and 4 there, on its own clocks and RSS readings, with the same warm-up and
+timed steps; step 5 is the same code on the final states it wrote.
 """
 
 from __future__ import annotations
@@ -26,7 +30,7 @@ import numpy as np
 
 from bench import quality
 from bench.geometry import LocalPolygons
-from bench.peers import make_engine
+from bench.peers import OWN_PROCESS, make_engine
 from bench.scenes import BenchScene, build
 from isaac.scene.checks import mass_properties
 
@@ -42,9 +46,12 @@ def rss_bytes() -> int:
 
 
 def warm_engine(engine_name: str) -> None:
-    """A few steps of the head-on scene: compiles or loads whatever the engine compiles."""
+    """A few steps of the head-on scene: compiles or loads whatever the engine compiles (an
+    engine that runs in a process of its own has nothing to load in this one)."""
     tiny = build("head-on")
     engine = make_engine(engine_name, tiny.scene)
+    if engine_name in OWN_PROCESS:
+        return
     for _ in range(5):
         engine.step()
     engine.poses()
@@ -113,12 +120,9 @@ def _steps(engine, steps: int) -> None:
         engine.step()
 
 
-def run(scene_name: str, engine_name: str) -> dict:
-    warm_engine(engine_name)
-    bench = build(scene_name)
-    polys = LocalPolygons.from_scene(bench.scene)
+def _time_in_process(engine_name: str, bench: BenchScene) -> tuple[object, tuple, dict]:
+    """(engine, start (positions, angles, velocities), timing figures) in this process."""
     n = bench.n_bodies
-
     rss0 = rss_bytes()
     t0 = time.perf_counter()
     engine = make_engine(engine_name, bench.scene)
@@ -131,22 +135,50 @@ def run(scene_name: str, engine_name: str) -> dict:
     t0 = time.perf_counter()
     _steps(engine, bench.timed_steps)
     elapsed = time.perf_counter() - t0
-    ms = 1000.0 * elapsed / bench.timed_steps
-
-    return dict(
-        scene=scene_name,
-        engine=engine.name,
-        settings=engine.settings,
-        n_bodies=n,
-        n_dynamic=bench.n_dynamic,
-        dt=bench.scene.world.dt,
-        warmup_steps=bench.warmup_steps,
-        timed_steps=bench.timed_steps,
-        ms_per_step=ms,
+    timing = dict(
+        ms_per_step=1000.0 * elapsed / bench.timed_steps,
         build_s=build_s,
         memory_per_body_bytes=(rss_warm - rss0) / n,
         memory_built_per_body_bytes=(rss_built - rss0) / n,
         peak_rss_bytes=resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024,
+    )
+    return engine, start, timing
+
+
+def _time_in_its_process(engine_name: str, bench: BenchScene) -> tuple[object, tuple, dict]:
+    """The same for an engine that runs the scene in its own process (OWN_PROCESS)."""
+    n = bench.n_bodies
+    engine = make_engine(engine_name, bench.scene)
+    own = engine.run_scene(bench.warmup_steps, bench.timed_steps)
+    rss0 = own["rss_before_build_bytes"]
+    timing = dict(
+        ms_per_step=own["ms_per_step"],
+        cpu_ms_per_step=own["cpu_ms_per_step"],
+        build_s=own["build_s"],
+        memory_per_body_bytes=(own["rss_warm_bytes"] - rss0) / n,
+        memory_built_per_body_bytes=(own["rss_built_bytes"] - rss0) / n,
+        peak_rss_bytes=own["peak_rss_bytes"],
+        engine_version=engine.version,
+    )
+    return engine, engine.start(), timing
+
+
+def run(scene_name: str, engine_name: str) -> dict:
+    warm_engine(engine_name)
+    bench = build(scene_name)
+    polys = LocalPolygons.from_scene(bench.scene)
+    timed = _time_in_its_process if engine_name in OWN_PROCESS else _time_in_process
+    engine, start, timing = timed(engine_name, bench)
+    return dict(
+        scene=scene_name,
+        engine=engine.name,
+        settings=engine.settings,
+        n_bodies=bench.n_bodies,
+        n_dynamic=bench.n_dynamic,
+        dt=bench.scene.world.dt,
+        warmup_steps=bench.warmup_steps,
+        timed_steps=bench.timed_steps,
+        **timing,
         scene_source=bench.scene.source,
         quality=measure_quality(bench, polys, start, engine),
     )

@@ -255,3 +255,39 @@ def test_the_first_isaac_run_is_judged_to_its_first_step_and_reported_with_its_w
     )
     text = markdown(meta, [], [], [], [], [target], first)
     assert f"first step {first_step:.1f} s after the command started, 17.9 s for the whole" in text
+
+
+def test_pyramid_100_is_box2d_v3s_large_pyramid():
+    # Box2D v3's CreateLargePyramid (shared/benchmarks.c), recomputed: base 100, half-extent
+    # a = 0.5 m, box i-th row j-th column centre x = (i + 1) a + 2 (j - i) a - a * 100,
+    # y = (2 i + 1) a
+    from bench.scenes import ALL_SCENES, QUICK_SCENES, build
+
+    bench = build("pyramid-100")
+    a, base = 0.5, 100
+    expected = sorted(
+        ((i + 1) * a + 2 * (j - i) * a - a * base, (2 * i + 1) * a)
+        for i in range(base)
+        for j in range(i, base)
+    )
+    boxes = [b for b in bench.scene.bodies if not b.concrete]
+    (ground,) = [b for b in bench.scene.bodies if b.concrete]
+    assert (bench.n_bodies, bench.n_dynamic) == (5051, 5050)
+    np.testing.assert_allclose(sorted(b.position for b in boxes), expected, rtol=0, atol=1e-12)
+    assert all(b.vertices == BOX for b in boxes)
+    assert {(b.density, b.friction, b.restitution) for b in boxes} == {(1.0, 0.6, 0.0)}
+    assert max(v[1] for v in ground.vertices) + ground.position[1] == 0.0  # its top at y = 0
+    assert "pyramid-100" in ALL_SCENES and "pyramid-100" not in QUICK_SCENES
+
+
+@pytest.mark.parametrize("engine_name", ENGINES)
+def test_pyramid_100_loads_and_steps_in_every_engine(engine_name):
+    from bench.peers import make_engine
+    from bench.scenes import build
+
+    bench = build("pyramid-100")
+    engine = make_engine(engine_name, bench.scene)
+    engine.step()
+    pos, ang = engine.poses()
+    assert pos.shape == (5051, 2) and ang.shape == (5051,)
+    assert np.all(np.isfinite(pos))

@@ -45,3 +45,32 @@ def test_the_results_files_name_the_cpu_model_the_commit_and_the_date(tmp_path):
     written = [json.loads(line) for line in jsonl.read_text().splitlines()]
     assert written[0]["kind"] == "meta" and written[0]["cpu"] == "Fake CPU 9000"
     assert written[1:] == [run, row]
+
+
+def _run(engine: str, rep: int, ms: float) -> dict:
+    return dict(
+        kind="run", scene="pile-100", engine=engine, engine_arg=engine, rep=rep, settings="s",
+        n_bodies=103, ms_per_step=ms, memory_per_body_bytes=0, timed_steps=10, warmup_steps=5,
+        quality=None,
+    )  # fmt: skip
+
+
+def test_the_ratio_to_box2d_v3_is_taken_within_each_repetition():
+    # repetition 0: isaac 2 / box2d-v3 1 = 2; repetition 1: 6 / 2 = 3; median 2.5, while the
+    # ratio of the medians (4 / 1.5) would differ
+    runs = [_run("box2d-v3", 0, 1.0), _run("isaac-balanced", 0, 2.0)]
+    runs += [_run("box2d-v3", 1, 2.0), _run("isaac-balanced", 1, 6.0)]
+    rows = aggregate(runs, ["pile-100"], ["box2d-v3", "isaac-balanced"])
+    isaac = next(r for r in rows if r["engine_arg"] == "isaac-balanced")
+    assert isaac["ratio_to_box2d_v3"] == 2.5
+    assert isaac["ratio_to_pymunk"] is None
+    meta = meta_info(reps=2, skipped=[])
+    header = markdown(meta, rows, [], [], [], []).splitlines()[2]
+    assert "| ratio to pymunk | ratio to Box2D v3 |" in header
+
+
+def test_without_box2d_v3_the_table_has_no_column_for_it():
+    rows = aggregate([_run("pymunk", 0, 1.0)], ["pile-100"], ["pymunk"])
+    assert rows[0]["ratio_to_box2d_v3"] is None
+    text = markdown(meta_info(reps=1, skipped=[]), rows, [], [], [], [])
+    assert "Box2D v3 |" not in text
