@@ -496,6 +496,56 @@ class Simulation:
         )
         self._state_checked()
 
+    # ---- world queries (isaac.engine.queries): the current state, read without stepping -----
+    # Units: m, world frame; a ray is origin + t * direction, t in [0, max_fraction] (direction
+    # not normalised). filter: None (every existing body) or an
+    # isaac.engine.queries.QueryFilter (the collision filter's rule). Bodies that do not exist
+    # now are never reported. Bad input: TypeError or ValueError naming the argument.
+
+    def ray_cast(self, origin, direction, max_fraction=1.0, filter=None):
+        """The first shape the ray enters: an `isaac.engine.queries.RayHit` (hit, body, name,
+        point (m, world), unit outward normal (world), fraction). A ray starting inside a
+        shape does not hit it (Box2D's rule); ties go to the lowest body index."""
+        from isaac.engine import queries
+
+        self._check_state()
+        return queries.ray_cast(self.model, self.state, origin, direction, max_fraction, filter)
+
+    def ray_cast_many(self, origins, directions, max_fraction=1.0, filter=None):
+        """`ray_cast` of m rays at once (origins, directions: (m, 2) m; max_fraction a number
+        or (m,)): an `isaac.engine.queries.RayHits` of arrays, row k for ray k."""
+        from isaac.engine import queries
+
+        self._check_state()
+        return queries.ray_cast_many(
+            self.model, self.state, origins, directions, max_fraction, filter
+        )
+
+    def query_box(self, lo, hi, filter=None) -> np.ndarray:
+        """Sorted indices of the bodies whose world AABB overlaps the box [lo, hi] ((x, y) m,
+        world; touching counts): boxes only, as Box2D's b2World_OverlapAABB (exact: `overlaps`)."""
+        from isaac.engine import queries
+
+        self._check_state()
+        return queries.query_box(self.model, self.state, lo, hi, filter)
+
+    def overlaps(self, shape, pose, filter=None) -> np.ndarray:
+        """Sorted indices of the bodies whose shape overlaps (or touches) `shape`, a circle's
+        radius (m) or a convex polygon's (x, y) vertices (m, its own frame), placed at pose
+        (x, y) or (x, y, angle) (m, world; rad)."""
+        from isaac.engine import queries
+
+        self._check_state()
+        return queries.overlaps(self.model, self.state, shape, pose, filter)
+
+    def closest(self, point, filter=None):
+        """The body nearest to `point` ((x, y) m, world): an `isaac.engine.queries.Closest`
+        (found, body, name, its nearest point (m, world), distance (m), 0 inside)."""
+        from isaac.engine import queries
+
+        self._check_state()
+        return queries.closest(self.model, self.state, point, filter)
+
 
 @dataclass(frozen=True, repr=False)
 class BodyView:
