@@ -76,6 +76,12 @@ def _exercise() -> None:
             encoder.encode(sim.step())  # the staged step
         for record in sim.run(3):  # the fused driver
             encoder.encode(record)
+    # the world queries (isaac.engine.queries), on polygons and a circle
+    queried = Simulation(load_scene("scenes/rolling.yaml"), compile_ahead=False)
+    queried.ray_cast_many([[-5.0, 3.0], [0.0, 5.0]], [[10.0, -3.0], [0.0, -10.0]])
+    queried.overlaps(0.5, (0.0, 0.5))
+    queried.overlaps([[0, 0], [1, 0], [0, 1]], (0.0, 0.5, 0.2))
+    queried.closest((0.0, 3.0))
     # the timed drivers (isaac run --profile), with either solver
     for scene in (*scenes[:3], jointed):
         scene = replace(scene, world=replace(scene.world, steps=3))
