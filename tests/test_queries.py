@@ -385,6 +385,35 @@ def test_the_same_bits_without_the_compiler():
     assert done.stdout.strip() == _digest(_sim(random_scene_text(7, rows=3, columns=4)))
 
 
+def test_bodies_far_larger_than_most_keep_the_grid_small_and_the_hits_right():
+    """Half the bodies 100 m boxes over 41 tiny discs: cells sized for the discs would list
+    each box in every cell; the grid coarsens until it lists at most 16 entries a body."""
+    lines = ["world: {gravity: [0, 0], dt: 1/60, steps: 1}", "bodies:"]
+    disc, box = "{circle: {radius: 0.01}}", "{box: [100, 100]}"
+    lines += [f"  - {{name: d{k}, shape: {disc}, position: [{2.5 * k}, 60]}}" for k in range(41)]
+    lines += [f"  - {{name: b{k}, shape: {box}, position: [{50 + k / 100}, 0]}}" for k in range(40)]
+    sim = _sim("\n".join(lines) + "\n")
+    world = queries._world(sim.model, sim.state)
+    *_, start, bodies = queries.build_grid(world.aabb, np.ones(sim.n_bodies, dtype=bool))
+    assert len(bodies) <= 16 * sim.n_bodies + 16
+    shapes = world_shapes(sim)
+    origins, directions = _random_rays(5, 200, lo=(-5.0, 40.0), hi=(105.0, 70.0), length=(5, 60))
+    hits = sim.ray_cast_many(origins, directions)
+    for k in range(200):
+        want = oracle_first_hit(shapes, origins[k].tolist(), directions[k].tolist())
+        if want is None:
+            assert hits.body[k] == -1
+        elif not want[3]:
+            assert hits.body[k] == want[0] and abs(hits.fraction[k] - want[1]) <= TOL
+
+
+def test_a_record_of_another_scene_is_refused():
+    sim = _sim(BOX_AND_BALL)
+    other = _sim(FILTERED).record()
+    with pytest.raises(ValueError, match="the model has 2"):
+        queries.ray_cast(sim.model, other, (0.0, 0.0), (1.0, 0.0))
+
+
 # ---- box, shape and point queries --------------------------------------------------------------
 
 

@@ -71,6 +71,7 @@ MAX_QUERY_ANGLE = 1e6  # rad, the scene's own bound on angles (isaac.trig's accu
 # cells of the ray grid: at most this many per body considered (plus GRID_SPARE_CELLS)
 GRID_CELLS_PER_BODY = 4
 GRID_SPARE_CELLS = 16
+GRID_ENTRIES_PER_BODY = 16  # cell list entries a body, at most (bodies far above the median)
 # bodies are binned into every cell their box comes within this share of the world's largest
 # coordinate (at least 1 m) of: far more than the few roundings in the walk's cell boundaries,
 # so a hit point always lies in a cell the walk visits and its body is binned in
@@ -217,7 +218,7 @@ def _eligible(model, state, filter) -> np.ndarray:
     """(n,) bool: the bodies a query considers: existing ones the filter lets meet it."""
     exists = np.asarray(state.exists, dtype=bool)
     if exists.shape != (model.n_bodies,):
-        raise ValueError(f"the state has {exists.shape} bodies, the model {model.n_bodies}")
+        raise ValueError(f"the state's exists is {exists.shape}, the model has {model.n_bodies}")
     if filter is None:
         return exists.copy()
     if not isinstance(filter, QueryFilter):
@@ -247,9 +248,14 @@ class _World:
 
 def _world(model, state, extra: int = 0, width: int = 0) -> _World:
     n = model.n_bodies
-    position = np.array(state.position, dtype=np.float64).reshape(n, 2)
-    angle = np.array(state.angle, dtype=np.float64).reshape(n)
-    exists = np.array(state.exists, dtype=bool).reshape(n)
+    position = np.array(state.position, dtype=np.float64)
+    angle = np.array(state.angle, dtype=np.float64)
+    exists = np.array(state.exists, dtype=bool)
+    if position.shape != (n, 2) or angle.shape != (n,) or exists.shape != (n,):
+        raise ValueError(
+            f"the state's position, angle and exists must be ({n}, 2), ({n},), ({n},) for "
+            f"this model's {n} bodies, got {position.shape}, {angle.shape}, {exists.shape}"
+        )
     if not (np.isfinite(position).all() and np.isfinite(angle).all()):
         raise ValueError("the state's positions and angles must be finite")
     w = max(model.vertices_local.shape[1], width)
@@ -366,7 +372,8 @@ def build_grid(aabb, eligible):
     Returns (origin_x, origin_y, cell, nx, ny, start, bodies): cell side (m), nx * ny cells,
     row-major (cell iy * nx + ix), the bodies of cell c in bodies[start[c]:start[c + 1]] in
     increasing index (determinism: the walk then meets ties in index order). A body is binned
-    into every cell its box, widened by the margin (GRID_MARGIN), overlaps. nx = 0: no body."""
+    into every cell its box, widened by the margin (GRID_MARGIN), overlaps; cells are made
+    coarser until that is at most GRID_ENTRIES_PER_BODY entries a body. nx = 0: no body."""
     n = aabb.shape[0]
     m = 0
     lo_x = np.inf
@@ -406,6 +413,19 @@ def build_grid(aabb, eligible):
         cell *= 1.25
     nx = int(math.floor(width / cell)) + 1
     ny = int(math.floor(height / cell)) + 1
+    # many bodies much larger than the median would each fill many cells: coarser cells until
+    # the lists hold at most GRID_ENTRIES_PER_BODY entries a body (one cell holds m)
+    while nx * ny > 1:
+        entries = 0
+        for i in range(n):
+            if eligible[i]:
+                x0, y0, x1, y1 = _cell_span(aabb, i, margin, lo_x, lo_y, cell, nx, ny)
+                entries += (x1 - x0 + 1) * (y1 - y0 + 1)
+        if entries <= GRID_ENTRIES_PER_BODY * m + GRID_SPARE_CELLS:
+            break
+        cell *= 2.0
+        nx = int(math.floor(width / cell)) + 1
+        ny = int(math.floor(height / cell)) + 1
     start = np.zeros(nx * ny + 1, dtype=np.int64)
     # two passes over the bodies in index order: count each cell's bodies, then place them
     for i in range(n):
