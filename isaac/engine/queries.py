@@ -30,11 +30,12 @@ the filter: with group 0 that is Box2D v3's b2QueryFilter (the body's category h
 filter's mask and the body's mask a bit of the filter's category).
 
 Ray broad phase: a uniform grid built at each call from the current boxes (cell side the
-median box side, at most 4 cells a body), bodies listed in each cell in index order; each ray
-walks its cells in order along the ray (Amanatides and Woo, 1987), tests each body once (a
-per-ray stamp) and stops once its best hit lies before the cell it would enter next. The grid
-only prunes: every body a ray could hit before its best is tested, so the result is the one a
-test of every body gives (tests/test_queries.py checks that against brute force).
+median box side; at most 4 cells and 16 list entries a body, coarser cells else), bodies listed
+in each cell in index order; each ray walks its cells in order along the ray (Amanatides and
+Woo, 1987), tests each body once (a per-ray stamp) and stops once its best hit lies before the
+cell it would enter next. The grid only prunes: every body a ray could hit before its best is
+tested, so the result is the one a test of every body gives (tests/test_queries.py checks that
+against brute force).
 
 Shapes dispatch on a kind code (`shape_kinds`): POLYGON, CIRCLE. A new shape kind is one more
 code and one more branch in `_ray_shape`, `_overlaps_shape` and `_distance_shape`.
