@@ -451,6 +451,19 @@ def build_grid(aabb, eligible):
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
+def _clip_slab(o, d, lo, hi, t0, t1):
+    """[t0, t1] clipped to where o + t * d lies in [lo, hi] (one axis of a box, m); an empty
+    interval (t0 > t1) when a ray parallel to the axis lies outside it."""
+    if d == 0.0:
+        if o < lo or o > hi:
+            return 1.0, 0.0
+        return t0, t1
+    ta = (lo - o) / d
+    tb = (hi - o) / d
+    return max(t0, min(ta, tb)), min(t1, max(ta, tb))
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
 def _cell_index(x, lo, cell, count):
     """The cell along one axis holding coordinate x, clamped to 0 .. count - 1."""
     k = int(math.floor((x - lo) / cell))
@@ -504,24 +517,8 @@ def cast_rays(
         if nx == 0 or (dx == 0.0 and dy == 0.0):
             continue
         # the ray's part inside the grid's box (slabs), within [0, max_fraction]
-        t0 = 0.0
-        t1 = t_end
-        if dx == 0.0:
-            if ox < lo_x or ox > hi_x:
-                continue
-        else:
-            ta = (lo_x - ox) / dx
-            tb = (hi_x - ox) / dx
-            t0 = max(t0, min(ta, tb))
-            t1 = min(t1, max(ta, tb))
-        if dy == 0.0:
-            if oy < lo_y or oy > hi_y:
-                continue
-        else:
-            ta = (lo_y - oy) / dy
-            tb = (hi_y - oy) / dy
-            t0 = max(t0, min(ta, tb))
-            t1 = min(t1, max(ta, tb))
+        t0, t1 = _clip_slab(ox, dx, lo_x, hi_x, 0.0, t_end)
+        t0, t1 = _clip_slab(oy, dy, lo_y, hi_y, t0, t1)
         if t0 > t1:
             continue
         ix = _cell_index(ox + t0 * dx, lo_x, cell, nx)
